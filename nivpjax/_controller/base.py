@@ -1,0 +1,63 @@
+"""The step-size controller interface."""
+
+import abc
+from typing import Any
+
+import equinox as eqx
+from jaxtyping import Array, Bool, Float
+
+from .._solution import StepStats
+
+
+class StepInfo(eqx.Module):
+    """Everything a controller may look at after an attempted step, as one object (a learned
+    controller computes its features from it without a new signature).
+
+    - `t0`, `h`: where the attempt started and its size.
+    - `t1`: the end of the integration interval.
+    - `y0`, `y1`: the state before and the candidate after the step.
+    - `y_error`: the local error estimate (zeros if the stepper has none).
+    - `error_order`: the power of $h$ in `y_error`.
+    - `stats`: nonlinear diagnostics ([`nivpjax.StepStats`][]).
+    - `error_mask`: components that enter the error norm (differential rows by default).
+    """
+
+    t0: Float[Array, ""]
+    h: Float[Array, ""]
+    t1: Float[Array, ""]
+    y0: Float[Array, " n"]
+    y1: Float[Array, " n"]
+    y_error: Float[Array, " n"]
+    error_order: int = eqx.field(static=True)
+    stats: StepStats
+    error_mask: Bool[Array, " n"]
+
+
+class AbstractController(eqx.Module):
+    """Decides whether to accept a step and how large the next one is.
+
+    - `init(t0, t1, y0, h0, f0, error_order, error_mask) -> (h, state)`: the first step size
+      (`h0` if given, otherwise the controller's own estimate; `f0` is $f(t_0, y_0)$) and
+      the controller's state.
+    - `adapt(info, state) -> (accept, h_next, state)`: after an attempt. Failed nonlinear
+      solves arrive with `info.stats.nonlinear_result` set; a controller must reject them.
+    - `h_min`, `h_max`: step bounds enforced by the loop (`h_min` failures set
+      `RESULTS.h_min_reached`).
+    - `needs_error_estimate`: if True the solver gives the stepper an error estimate
+      (embedded or Richardson).
+    """
+
+    @property
+    @abc.abstractmethod
+    def needs_error_estimate(self) -> bool: ...
+
+    @property
+    @abc.abstractmethod
+    def bounds(self) -> tuple[Any, Any]:
+        """`(h_min, h_max)`, each a float or `None`."""
+
+    @abc.abstractmethod
+    def init(self, t0, t1, y0, h0, f0, error_order, error_mask): ...
+
+    @abc.abstractmethod
+    def adapt(self, info: StepInfo, state): ...

@@ -1,0 +1,114 @@
+"""A diffrax-style PID step-size controller with a masked error norm."""
+
+import jax
+import jax.numpy as jnp
+
+from .._norms import scaled_rms_norm
+from .._results import RESULTS
+from .base import AbstractController, StepInfo
+
+
+class PIDController(AbstractController):
+    r"""Adaptive step size from the local error estimate, as in diffrax.
+
+    With $e_n$ the RMS of the error scaled by $\text{atol} + \text{rtol}\max(|y_0|, |y_1|)$
+    over the masked components and $k$ the error order, the step factor is
+
+    $$ \text{safety}\cdot e_n^{-\beta_1/k} e_{n-1}^{-\beta_2/k} e_{n-2}^{-\beta_3/k},\quad
+       \beta_1 = p + i + d,\ \beta_2 = -(p + 2d),\ \beta_3 = d, $$
+
+    clipped to `[factormin, factormax]` (and to at most 1 after a rejection). A step is
+    accepted when $e_n \le 1$. A failed nonlinear solve is rejected and the step shrinks by
+    `nonlinear_factor`. The factor is never differentiated (`stop_gradient`): differentiating
+    $e^{-1/k}$ through an adaptive loop gives meaningless, enormous gradients.
+
+    **Arguments:**
+
+    - `rtol`, `atol`: tolerances (positive).
+    - `pcoeff`, `icoeff`, `dcoeff`: PID coefficients (default: integral only, i.e. the
+      classical controller).
+    - `safety`, `factormin`, `factormax`: factor safety and clipping.
+    - `h_min`, `h_max`: step bounds (`None`: no upper bound, and a lower bound of a few
+      hundred ulps of `t1`).
+    - `error_mask`: boolean array selecting the components in the norm; `None` uses the
+      differential rows of the mass matrix.
+    - `nonlinear_factor`: shrink factor after a failed nonlinear solve.
+    """
+
+    rtol: float = 1e-3
+    atol: float = 1e-6
+    pcoeff: float = 0.0
+    icoeff: float = 1.0
+    dcoeff: float = 0.0
+    safety: float = 0.9
+    factormin: float = 0.2
+    factormax: float = 10.0
+    h_min: float | None = None
+    h_max: float | None = None
+    error_mask: jax.Array | None = None
+    nonlinear_factor: float = 0.25
+
+    def __check_init__(self):
+        for name in ("rtol", "atol"):
+            value = getattr(self, name)
+            if not (jnp.isfinite(value) and value > 0):
+                raise ValueError(f"`{name}` must be positive and finite, got {value}.")
+        if self.h_min is not None and self.h_max is not None and self.h_min > self.h_max:
+            raise ValueError(
+                f"`h_min` must not exceed `h_max`, got h_min={self.h_min}, h_max={self.h_max}."
+            )
+        if not 0 < self.factormin <= 1 <= self.factormax:
+            raise ValueError("need 0 < factormin <= 1 <= factormax.")
+
+    @property
+    def needs_error_estimate(self) -> bool:
+        return True
+
+    @property
+    def bounds(self):
+        return self.h_min, self.h_max
+
+    def init(self, t0, t1, y0, h0, f0, error_order, error_mask):
+        dtype = y0.dtype
+        one = jnp.ones((), dtype)
+        if h0 is not None:
+            h = jnp.asarray(h0, dtype)
+        else:
+            # Hairer–Wanner's first guess: 1% of the ratio of the scaled state and slope.
+            mask = error_mask
+            d0 = scaled_rms_norm(y0, y0, y0, self.rtol, self.atol, mask)
+            d1 = scaled_rms_norm(f0, y0, y0, self.rtol, self.atol, mask)
+            small = (d0 < 1e-5) | (d1 < 1e-5)
+            h = jnp.where(small, 1e-6, 0.01 * d0 / jnp.where(d1 > 0, d1, 1.0))
+            h = jnp.minimum(h, 0.1 * jnp.abs(t1 - t0))
+            h = jax.lax.stop_gradient(h.astype(dtype))
+        if self.h_max is not None:
+            h = jnp.minimum(h, self.h_max)
+        if self.h_min is not None:
+            h = jnp.maximum(h, self.h_min)
+        return h, (one, one)
+
+    def adapt(self, info: StepInfo, state):
+        prev, prev_prev = state
+        err = scaled_rms_norm(
+            info.y_error, info.y0, info.y1, self.rtol, self.atol, info.error_mask
+        )
+        ok = info.stats.nonlinear_result == RESULTS.successful
+        finite = jnp.all(jnp.isfinite(info.y1)) & jnp.isfinite(err)
+        ok = ok & finite
+        accept = ok & (err <= 1)
+        k = info.error_order
+        beta1 = (self.pcoeff + self.icoeff + self.dcoeff) / k
+        beta2 = -(self.pcoeff + 2 * self.dcoeff) / k
+        beta3 = self.dcoeff / k
+        inv = 1.0 / jnp.maximum(jnp.where(ok, err, 1.0), 1e-10)
+        factor = self.safety * inv**beta1 * prev**beta2 * prev_prev**beta3
+        factor = jnp.clip(factor, self.factormin, self.factormax)
+        factor = jnp.where(accept, factor, jnp.minimum(factor, 1.0))
+        factor = jnp.where(ok, factor, self.nonlinear_factor)
+        factor = jax.lax.stop_gradient(factor)
+        h_next = info.h * factor
+        if self.h_max is not None:
+            h_next = jnp.minimum(h_next, self.h_max)
+        new_state = (jnp.where(accept, inv, prev), jnp.where(accept, prev, prev_prev))
+        return accept, h_next, jax.lax.stop_gradient(new_state)

@@ -1,0 +1,233 @@
+"""The compiled time loop: the only importer of `equinox.internal`."""
+
+import equinox as eqx
+import equinox.internal as eqxi
+import jax
+import jax.numpy as jnp
+
+from ._controller import AbstractController, StepInfo
+from ._model import Model
+from ._results import RESULTS
+from ._solution import AttemptLog, Solution
+from ._stepper import AbstractStepper
+
+
+class _LoopState(eqx.Module):
+    # Evolving state.
+    t: jax.Array
+    h: jax.Array
+    y: jax.Array
+    controller_state: object
+    # Counters.
+    n_accepted: jax.Array
+    n_rejected: jax.Array
+    n_attempts: jax.Array
+    n_iterations: jax.Array
+    result: RESULTS
+    # Buffers (write-only inside the loop), one row per accepted step.
+    ts: jax.Array
+    ys: jax.Array
+    hs: jax.Array
+    multipliers: jax.Array
+    iterations: jax.Array
+    residual_norms: jax.Array
+    nonlinear_success: jax.Array
+    # Buffers, one row per attempt (or None).
+    attempts: AttemptLog | None
+
+
+def _buffers(state: _LoopState):
+    return [state.ts, state.ys, state.hs, state.multipliers, state.residual_norms]
+
+
+def default_h_min(t0, t1, dtype):
+    eps = jnp.finfo(dtype).eps
+    return 64 * eps * jnp.maximum(jnp.maximum(jnp.abs(t0), jnp.abs(t1)), jnp.abs(t1 - t0))
+
+
+def _init_attempts(max_steps, dtype):
+    return AttemptLog(
+        t=jnp.full((max_steps,), jnp.inf, dtype),
+        h=jnp.zeros((max_steps,), dtype),
+        accepted=jnp.zeros((max_steps,), bool),
+        error_norm=jnp.zeros((max_steps,), dtype),
+        iterations=jnp.zeros((max_steps,), jnp.int32),
+        nonlinear_success=jnp.zeros((max_steps,), bool),
+    )
+
+
+def _log_attempt(log: AttemptLog, i, t, h, accepted, err, stats):
+    def put(buf, x):
+        return eqxi.buffer_at_set(buf, i, x)
+
+    return AttemptLog(
+        t=put(log.t, t),
+        h=put(log.h, h),
+        accepted=put(log.accepted, accepted),
+        error_norm=put(log.error_norm, err),
+        iterations=put(log.iterations, stats.iterations.astype(jnp.int32)),
+        nonlinear_success=put(
+            log.nonlinear_success, stats.nonlinear_result == RESULTS.successful
+        ),
+    )
+
+
+def run(
+    model: Model,
+    stepper: AbstractStepper,
+    controller: AbstractController,
+    t0,
+    t1,
+    y0,
+    args,
+    h0,
+    error_mask,
+    max_steps: int,
+    save_attempts: bool,
+    kind: str,
+    progress,
+) -> Solution:
+    dtype = y0.dtype
+    n = y0.shape[0]
+    f0 = model.f(t0, y0, args)
+    error_order = stepper.error_order if controller.needs_error_estimate else 1
+    h, controller_state = controller.init(t0, t1, y0, h0, f0, error_order, error_mask)
+    h_min, h_max = controller.bounds
+    h_min = default_h_min(t0, t1, dtype) if h_min is None else jnp.asarray(h_min, dtype)
+    h = jnp.maximum(h, h_min)
+
+    rows = max_steps + 1
+    state = _LoopState(
+        t=t0,
+        h=h,
+        y=y0,
+        controller_state=controller_state,
+        n_accepted=jnp.array(0, jnp.int32),
+        n_rejected=jnp.array(0, jnp.int32),
+        n_attempts=jnp.array(0, jnp.int32),
+        n_iterations=jnp.array(0, jnp.int32),
+        result=RESULTS.successful,
+        ts=jnp.full((rows,), jnp.inf, dtype).at[0].set(t0),
+        ys=jnp.zeros((rows, n), dtype).at[0].set(y0),
+        hs=jnp.zeros((rows,), dtype).at[0].set(h),
+        multipliers=jnp.zeros((rows, n), dtype),
+        iterations=jnp.zeros((rows,), jnp.int32),
+        residual_norms=jnp.zeros((rows,), dtype),
+        nonlinear_success=jnp.ones((rows,), bool),
+        attempts=_init_attempts(max_steps, dtype) if save_attempts else None,
+    )
+
+    def cond(s: _LoopState):
+        return (s.t < t1) & (s.result == RESULTS.successful) & (s.n_attempts < max_steps)
+
+    def body(s: _LoopState):
+        remaining = t1 - s.t
+        last = s.h >= remaining
+        h_try = jnp.where(last, remaining, s.h)
+        # A finished member of a vmapped batch still runs this body (its result is
+        # discarded); keep its step finite so nothing divides by zero, even in reverse mode.
+        h_try = jnp.where(h_try > 0, h_try, jnp.maximum(s.h, h_min))
+        h_try = jax.lax.stop_gradient(h_try)
+        out = stepper.step(model, s.t, h_try, s.y, args)
+        y_error = jnp.zeros_like(out.y1) if out.y_error is None else out.y_error
+        info = StepInfo(
+            t0=s.t,
+            h=h_try,
+            t1=t1,
+            y0=s.y,
+            y1=out.y1,
+            y_error=y_error,
+            error_order=error_order,
+            stats=out.stats,
+            error_mask=error_mask,
+        )
+        accept, h_next, controller_state = controller.adapt(info, s.controller_state)
+        accept = accept & jnp.all(jnp.isfinite(out.y1))
+        at_floor = h_try <= h_min * (1 + 1e-6)
+        floor_failure = ~accept & at_floor
+        nonlinear_ok = out.stats.nonlinear_result == RESULTS.successful
+        failure_code = RESULTS.where(
+            nonlinear_ok, RESULTS.h_min_reached, RESULTS.nonlinear_failure
+        )
+        result = RESULTS.where(floor_failure, failure_code, s.result)
+        h_next = jnp.maximum(h_next, h_min)
+        if h_max is not None:
+            h_next = jnp.minimum(h_next, h_max)
+        h_next = jax.lax.stop_gradient(h_next)
+
+        t_new = jnp.where(accept, jnp.where(last, t1, s.t + h_try), s.t)
+        y_new = jnp.where(accept, out.y1, s.y)
+        idx = s.n_accepted + 1
+
+        def put(buf, x):
+            return eqxi.buffer_at_set(buf, idx, x, pred=accept)
+
+        attempts = s.attempts
+        if attempts is not None:
+            err = jnp.sqrt(jnp.mean(jnp.where(error_mask, y_error, 0.0) ** 2))
+            attempts = _log_attempt(attempts, s.n_attempts, s.t, h_try, accept, err, out.stats)
+        if progress is not None:
+            progress(t_new)
+        return _LoopState(
+            t=t_new,
+            h=h_next,
+            y=y_new,
+            controller_state=controller_state,
+            n_accepted=s.n_accepted + accept.astype(jnp.int32),
+            n_rejected=s.n_rejected + (~accept).astype(jnp.int32),
+            n_attempts=s.n_attempts + 1,
+            n_iterations=s.n_iterations + out.stats.iterations.astype(jnp.int32),
+            result=result,
+            ts=put(s.ts, t_new),
+            ys=put(s.ys, y_new),
+            hs=put(s.hs, h_try),
+            multipliers=put(s.multipliers, out.multipliers),
+            iterations=put(s.iterations, out.stats.iterations.astype(jnp.int32)),
+            residual_norms=put(s.residual_norms, out.stats.residual_norm),
+            nonlinear_success=put(s.nonlinear_success, nonlinear_ok),
+            attempts=attempts,
+        )
+
+    final = eqxi.while_loop(
+        cond, body, state, max_steps=max_steps, buffers=_buffers, kind=kind
+    )
+    result = RESULTS.where(
+        (final.result == RESULTS.successful) & (final.t < t1),
+        RESULTS.time_max_steps_reached,
+        final.result,
+    )
+    # Padding rows repeat the last accepted state so that reductions and plots stay finite.
+    k = final.n_accepted
+    row = jnp.arange(rows)
+    pad = row > k
+    ys = jnp.where(pad[:, None], final.ys[k], final.ys)
+    multipliers = jnp.where(pad[:, None], final.multipliers[k], final.multipliers)
+    return Solution(
+        ts=jnp.where(pad, jnp.inf, final.ts),
+        ys=ys,
+        hs=jnp.where(pad, 0.0, final.hs),
+        multipliers=multipliers,
+        iterations=jnp.where(pad, 0, final.iterations),
+        residual_norms=jnp.where(pad, 0.0, final.residual_norms),
+        nonlinear_success=jnp.where(pad, True, final.nonlinear_success),
+        n_accepted=k,
+        n_rejected=final.n_rejected,
+        n_iterations=final.n_iterations,
+        result=result,
+        attempts=final.attempts,
+    )
+
+
+def interpolate(sol: Solution, t_eval):
+    """Piecewise-linear interpolation of the accepted states at `t_eval`; NaN after the
+    point where the solve stopped (a failed run is flagged in `result`)."""
+    k = sol.n_accepted
+    idx = jnp.searchsorted(sol.ts, t_eval, side="right") - 1
+    idx = jnp.clip(idx, 0, jnp.maximum(k - 1, 0))
+    ta, tb = sol.ts[idx], sol.ts[jnp.minimum(idx + 1, k)]
+    ya, yb = sol.ys[idx], sol.ys[jnp.minimum(idx + 1, k)]
+    span = jnp.where(tb > ta, tb - ta, 1.0)
+    w = jnp.clip((t_eval - ta) / span, 0.0, 1.0)[:, None]
+    y = ya + w * (yb - ya)
+    beyond = t_eval > sol.ts[k] * (1 + 1e-12) + 1e-300
+    return jnp.where(beyond[:, None], jnp.nan, y)

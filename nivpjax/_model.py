@@ -1,0 +1,66 @@
+"""The assembled problem: vector field, projector, descriptor matrix, algebraic rows."""
+
+from collections.abc import Callable
+from typing import Any
+
+import equinox as eqx
+import jax.numpy as jnp
+from jaxtyping import Array, Bool, Float
+
+from ._projector import AbstractProjector, ProjectionContext
+
+
+class Model(eqx.Module):
+    r"""$A y' = f(t, y, \text{args})$ with the set-valued rule encoded by `projector`.
+
+    - `vector_field`: $f(t, y, \text{args})$, diffrax's convention.
+    - `projector`: the projector $P_K$ (identity for a smooth problem).
+    - `mass_matrix`: the constant descriptor matrix $A$, or `None` for the identity.
+    - `algebraic`: rows of $A$ that are identically zero (algebraic equations, multipliers,
+      switching selections). They are collocated at the end of each stage, scaled by
+      `tau / h` in the projection (see below) and left out of the error norm by default.
+    - `tau`: scaling of algebraic rows: $\rho_i = \tau / h$ there and $\rho_i = h$ on
+      differential rows. A multiplier that enters its constraint with weight $h$ (friction,
+      relay and contact multipliers) is then scaled $O(1)$; for an algebraic equation with
+      $O(1)$ sensitivity to its own unknowns, $\tau \approx h$ gives the VI method better
+      steps (Newton does not care).
+    """
+
+    vector_field: Callable[[Any, Any, Any], Any]
+    projector: AbstractProjector
+    mass_matrix: Float[Array, "n n"] | None
+    algebraic: Bool[Array, " n"]
+    tau: float = 1.0
+
+    def f(self, t, y, args):
+        return jnp.asarray(self.vector_field(t, y, args), y.dtype)
+
+    def mass_times(self, v):
+        return v if self.mass_matrix is None else self.mass_matrix @ v
+
+    def solve_stage(self, solver, t_end, h_eff, y_base, f_explicit, theta, y_prev, guess, args):
+        r"""Solve one one-leg stage: find $y$ with, on differential rows,
+        $A(y - y_{\text{base}})/h_{\text{eff}} = \theta f(t_{\text{end}}, y) + (1-\theta) f_{\text{explicit}}$,
+        on algebraic rows $0 = f(t_{\text{end}}, y)$, subject to the projector.
+
+        Returns the nonlinear solution and the stage residual at the solution (the
+        constraint reaction per unit time: forces, contact impulses divided by $h$)."""
+        alg = self.algebraic
+
+        def residual(y):
+            fy = self.f(t_end, y, args)
+            diff = self.mass_times(y - y_base) / h_eff - theta * fy
+            if f_explicit is not None:
+                diff = diff - (1 - theta) * f_explicit
+            return jnp.where(alg, -fy, diff)
+
+        rho = jnp.where(alg, self.tau / h_eff, h_eff).astype(guess.dtype)
+
+        def project(z, y, rho_used):
+            ctx = ProjectionContext(
+                t=t_end, h=h_eff, y_prev=y_prev, y_iter=y, rho=rho_used, args=args
+            )
+            return self.projector(z, ctx)
+
+        sol = solver.solve(residual, project, rho, guess)
+        return sol, residual(sol.value)

@@ -1,0 +1,140 @@
+"""Interface of the nonlinear solvers for one implicit stage."""
+
+import abc
+from collections.abc import Callable
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import lineax as lx
+from jax import lax
+from jaxtyping import Array, Float, Int
+
+from .._results import RESULTS
+
+
+Residual = Callable[[Array], Array]
+Project = Callable[[Array, Array, Array], Array]
+
+
+class NonlinearSolution(eqx.Module):
+    """What a nonlinear solve returns.
+
+    **Fields:**
+
+    - `value`: the solution $y$ (differentiable through the implicit function theorem).
+    - `iterations`: number of outer iterations taken.
+    - `residual_norm`: $\\|G(y)\\|_\\infty$ at the returned value, with
+      $G(y) = y - P(y - \\rho R(y))$ at the problem's own $\\rho$.
+    - `result`: a [`nivpjax.RESULTS`][] code; `successful` iff the scaled residual met the
+      tolerance.
+    - `history`: a residual norm after each iteration, entries past `iterations` NaN
+      ("not reached"). Semismooth Newton records $\\|G\\|_\\infty$ (entry 0: the initial
+      guess); the VI method records its natural residual (entry 0 is NaN).
+    """
+
+    value: Float[Array, " n"]
+    iterations: Int[Array, ""]
+    residual_norm: Float[Array, ""]
+    result: RESULTS
+    history: Float[Array, " k"]
+
+
+def natural_map(residual: Residual, project: Project, rho) -> Callable[[Array], Array]:
+    """$G(y) = y - P(y - \\rho R(y); y, \\rho)$: zero exactly at solutions of the stage's VI."""
+
+    def G(y):
+        return y - project(y - rho * residual(y), y, rho)
+
+    return G
+
+
+def scaled_error(G_value, y, rtol, atol):
+    """$\\max_i |G_i| / (\\text{atol} + \\text{rtol} |y_i|)$; converged when $\\le 1$."""
+    return jnp.max(jnp.abs(G_value) / (atol + rtol * jnp.abs(y)), initial=0.0)
+
+
+def effective_tolerances(rtol, atol, dtype):
+    """Tolerances clamped to what the dtype can resolve (a float32 solve asked for 1e-12
+    would otherwise never converge)."""
+    eps = float(jnp.finfo(dtype).eps)
+    return max(float(rtol), 8 * eps), max(float(atol), 8 * eps)
+
+
+def dense_solve(J, b):
+    """Dense LU solve through lineax; returns the solution and whether it is usable."""
+    sol = lx.linear_solve(lx.MatrixLinearOperator(J), b, lx.LU(), throw=False)
+    ok = (sol.result == lx.RESULTS.successful) & jnp.all(jnp.isfinite(sol.value))
+    return sol.value, ok
+
+
+def _tangent_solve(g, b):
+    # g is the linearisation of G at the solution (its generalised Jacobian, with the
+    # projectors' custom-JVP elements); solve g(x) = b densely.
+    J = jax.jacfwd(g)(b)
+    x, _ = dense_solve(J, b)
+    return x
+
+
+class AbstractNonlinearSolver(eqx.Module):
+    """Solves the variational inequality of one implicit stage: find $y$ with
+    $y = P(y - \\rho R(y))$.
+
+    Subclasses implement `_iterate`, a `lax.while_loop` returning the value and float
+    diagnostics. `solve` wraps it in `jax.lax.custom_root`, so the returned value is
+    differentiated by the implicit function theorem on $G(y) = 0$ (with the generalised
+    Jacobian the projectors' custom JVP rules select), never by unrolling the iteration.
+    """
+
+    rtol: eqx.AbstractVar[float]
+    atol: eqx.AbstractVar[float]
+    max_steps: eqx.AbstractVar[int]
+
+    @abc.abstractmethod
+    def _iterate(self, residual: Residual, project: Project, rho, y0, rtol, atol):
+        """Return `(y, (iterations, history))` with float diagnostics."""
+
+    def solve(self, residual: Residual, project: Project, rho, y0) -> NonlinearSolution:
+        """Solve $y = P(y - \\rho R(y); y)$ from the initial guess `y0`.
+
+        **Arguments:**
+
+        - `residual`: $R(y)$, the stage's implicit residual (per unit time).
+        - `project`: $P(z; y, \\rho)$, the projector evaluated at the iterate `y` with the
+          scaling `rho` actually used to form `z` (proximal maps need it).
+        - `rho`: positive scaling, a scalar or one value per component.
+        - `y0`: the initial guess.
+        """
+        y0 = jnp.asarray(y0)
+        rho = jnp.broadcast_to(jnp.asarray(rho, y0.dtype), y0.shape)
+        rtol, atol = effective_tolerances(self.rtol, self.atol, y0.dtype)
+        G = natural_map(residual, project, rho)
+
+        def _solve(_, guess):
+            # Closes over the problem: custom_root ignores tangents of `_solve`'s constants,
+            # so the iteration itself is never differentiated.
+            return self._iterate(residual, project, rho, guess, rtol, atol)
+
+        y, (iterations, history) = lax.custom_root(G, y0, _solve, _tangent_solve, has_aux=True)
+        y_nd = lax.stop_gradient(y)
+        G_final = G(y_nd)
+        norm = jnp.max(jnp.abs(G_final), initial=0.0)
+        converged = scaled_error(G_final, y_nd, rtol, atol) <= 1
+        finite = jnp.all(jnp.isfinite(y_nd)) & jnp.isfinite(norm)
+        result = RESULTS.where(
+            converged & finite,
+            RESULTS.successful,
+            RESULTS.where(finite, RESULTS.nonlinear_max_steps_reached, RESULTS.nonfinite),
+        )
+        return NonlinearSolution(
+            value=y,
+            iterations=iterations.astype(jnp.int32),
+            residual_norm=norm,
+            result=result,
+            history=history,
+        )
+
+
+def init_history(max_steps, dtype, first):
+    h = jnp.full((max_steps + 1,), jnp.nan, dtype)
+    return h.at[0].set(first)

@@ -1,0 +1,23 @@
+"""The one masked, weighted error norm used by every controller."""
+
+import jax.numpy as jnp
+from jaxtyping import Array, Bool, Float
+
+
+def scaled_rms_norm(
+    y_error: Float[Array, " n"],
+    y0: Float[Array, " n"],
+    y1: Float[Array, " n"],
+    rtol,
+    atol,
+    mask: Bool[Array, " n"] | None = None,
+) -> Float[Array, ""]:
+    r"""RMS of $e_i / (\text{atol} + \text{rtol}\max(|y_{0,i}|, |y_{1,i}|))$ over the unmasked
+    components (those with `mask[i] == True`). Components left out of the mask (algebraic rows,
+    multipliers) do not enter the norm; with an empty mask the norm is zero."""
+    scale = atol + rtol * jnp.maximum(jnp.abs(y0), jnp.abs(y1))
+    ratio = y_error / scale
+    if mask is None:
+        return jnp.sqrt(jnp.mean(ratio**2))
+    count = jnp.maximum(jnp.sum(mask), 1)
+    return jnp.sqrt(jnp.sum(jnp.where(mask, ratio**2, 0.0)) / count)

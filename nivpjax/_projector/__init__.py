@@ -1,0 +1,15 @@
+from .ball import Ball as Ball, project_ball as project_ball
+from .base import (
+    AbstractProjector as AbstractProjector,
+    ProjectionContext as ProjectionContext,
+    default_context as default_context,
+)
+from .block import BlockProjector as BlockProjector
+from .box import Box as Box, clip as clip, NonNegative as NonNegative
+from .contact import UnilateralContact as UnilateralContact
+from .coulomb import CoulombFriction as CoulombFriction
+from .custom import CustomProjector as CustomProjector
+from .identity import Identity as Identity
+from .lcp import lcp_solve as lcp_solve
+from .sign import SignResolvent as SignResolvent
+from .soc import project_soc as project_soc, SecondOrderCone as SecondOrderCone

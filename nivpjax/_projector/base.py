@@ -1,0 +1,78 @@
+"""The projector interface and the context a projector is evaluated in."""
+
+import abc
+from collections.abc import Callable
+from typing import Any
+
+import equinox as eqx
+import jax.numpy as jnp
+from jaxtyping import Array, Float, PyTree
+
+
+class ProjectionContext(eqx.Module):
+    """Everything a state-dependent set may depend on during one implicit stage.
+
+    **Fields:**
+
+    - `t`: the time at the end of the stage, where the implicit equation is collocated.
+    - `h`: the stage's step size.
+    - `y_prev`: the state at the start of the stage (pre-impact velocities are read here).
+    - `y_iter`: the current nonlinear iterate. State-dependent bounds (e.g. a friction bound
+        $\\mu N(y)$) are evaluated here, so autodiff supplies their chain rule in the
+        generalised Jacobian.
+    - `rho`: the per-component scaling $\rho$ of the stage's map $y - \rho R(y)$ (for the
+        components the projector acts on). Proximal maps (Coulomb friction without a
+        multiplier state) and resolvents need it; true projections ignore it.
+    - `args`: the user's parameters.
+    """
+
+    t: Float[Array, ""]
+    h: Float[Array, ""]
+    y_prev: Float[Array, " n"]
+    y_iter: Float[Array, " n"]
+    rho: Float[Array, " m"]
+    args: PyTree[Any]
+
+
+def default_context(z: Array, args: PyTree[Any] = None) -> ProjectionContext:
+    """A context for evaluating a projector outside a time step (tests, interactive use):
+    `t = 0`, `h = 1`, `rho = 1`, and both states equal to `z`."""
+    z = jnp.asarray(z)
+    zero = jnp.zeros((), z.dtype)
+    one = jnp.ones((), z.dtype)
+    return ProjectionContext(
+        t=zero, h=one, y_prev=z, y_iter=z, rho=jnp.ones_like(z), args=args
+    )
+
+
+class AbstractProjector(eqx.Module):
+    """A Euclidean (or metric) projection onto a closed convex set $K$, possibly depending on
+    the context.
+
+    Subclasses implement `__call__(z, ctx) -> P_K(z)`. The map must be differentiable in the
+    sense of `jax.jvp` everywhere: kinks carry a `jax.custom_jvp` rule choosing one element of
+    the generalised (Clarke/B-) Jacobian, documented in the subclass.
+
+    Convention for kinks, shared by every built-in projector: a point on the boundary between
+    two smooth pieces takes the Jacobian of the piece whose closed region, listed in the
+    order *interior of $K$*, *polar/normal region*, *boundary pieces*, contains it first. In
+    particular a point of $K$ always gets the identity: it is the one-sided derivative from
+    inside the set, keeps the Newton matrix $I - D(I - \\rho J_R)$ equal to $\\rho J_R$ on free
+    components, and makes implicit gradients at grazing contact equal to those of the
+    unconstrained flow.
+    """
+
+    @abc.abstractmethod
+    def __call__(self, z: Float[Array, " n"], ctx: ProjectionContext) -> Float[Array, " n"]:
+        """Project `z` onto the set described by this projector in context `ctx`."""
+
+
+Bound = Float[Array, "..."] | Callable[[Any, Any, Any], Any]
+
+
+def resolve(value, ctx: ProjectionContext, dtype) -> Array:
+    """Evaluate a bound that is either an array or a callable `bound(t, y, args)` of the
+    current iterate."""
+    if callable(value):
+        value = value(ctx.t, ctx.y_iter, ctx.args)
+    return jnp.asarray(value, dtype=dtype)

@@ -1,0 +1,37 @@
+"""Coulomb friction on a velocity component, as a proximal map (no multiplier state)."""
+
+import jax.numpy as jnp
+
+from .base import AbstractProjector, Bound, ProjectionContext, resolve
+from .box import clip
+
+
+class CoulombFriction(AbstractProjector):
+    r"""Set-valued Coulomb friction acting directly on velocity components $v$:
+
+    $$ 0 \in R(y) + c(y)\,\operatorname{Sign}(v), $$
+
+    i.e. $m v' \in F - c\,\operatorname{Sign}(v)$ with the friction bound $c = \mu N \ge 0$
+    (array, or callable `bound(t, y, args)` for slip-weakening or state-dependent normal
+    force). The stage fixed point $v = P(v - \rho R)$ holds with the proximal map of
+    $\rho c|v|$ (soft thresholding), written through the Moreau decomposition
+
+    $$ P(z) = z - \rho\,\operatorname{clip}(z/\rho, -c, c), $$
+
+    where the clip is the friction force. This is the physics of the reference package's
+    `CoulombProjection`; it is a proximal map, not a projection onto a set (a projector in
+    the wide sense of this library: its fixed points encode the inclusion). No extra state is
+    needed: in stick the stage residual $R$ is the friction force (per unit mass).
+
+    Jacobian: the clip's element (identity on the closed interval), so at the stick/slip
+    boundary $|z| = \rho c$ the stick branch ($dP/dz = 0$) is taken; derivatives with respect
+    to $c$ (slip-weakening $\mu(s)$) and $\rho$ come from autodiff.
+    """
+
+    bound: Bound
+
+    def __call__(self, z, ctx: ProjectionContext):
+        z = jnp.asarray(z)
+        c = jnp.maximum(resolve(self.bound, ctx, z.dtype), 0.0)
+        rho = jnp.broadcast_to(ctx.rho, z.shape)
+        return z - rho * clip(z / rho, -c, c)

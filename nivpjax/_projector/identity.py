@@ -1,0 +1,11 @@
+import jax.numpy as jnp
+
+from .base import AbstractProjector, ProjectionContext
+
+
+class Identity(AbstractProjector):
+    """$P(z) = z$: no constraint. With this projector every implicit stage is an ordinary
+    implicit step, and the Newton matrix is exactly the step's Jacobian."""
+
+    def __call__(self, z, ctx: ProjectionContext):
+        return jnp.asarray(z)

@@ -1,0 +1,22 @@
+"""Result codes. Failures are values inside compiled code and exceptions at the public boundary."""
+
+import optimistix as optx
+
+
+class RESULTS(optx.RESULTS):  # pyright: ignore[reportGeneralTypeIssues]
+    nonlinear_failure = (
+        "The nonlinear solve of an implicit step did not converge, and shrinking the step "
+        "did not help before `h_min` was reached. Try a smaller `h_min`, a larger solver "
+        "`max_steps`, looser solver tolerances, or the other nonlinear solver."
+    )
+    h_min_reached = (
+        "The step size fell below `h_min` while the local error was still too large. The "
+        "problem may be too stiff for the tolerances, or have a discontinuity the scheme "
+        "cannot step over; loosen `rtol`/`atol` or lower `h_min`."
+    )
+    time_max_steps_reached = (
+        "The maximum number of time steps was reached before `t1`. Increase `max_steps`."
+    )
+    line_search_failure = (
+        "The Armijo line search of semismooth Newton found no step that decreases the merit."
+    )

@@ -1,0 +1,110 @@
+"""What `solve` returns."""
+
+import equinox as eqx
+import jax.numpy as jnp
+from jaxtyping import Array, Bool, Float, Int
+
+from ._results import RESULTS
+
+
+class StepStats(eqx.Module):
+    """Diagnostics of one attempted step, handed to the controller as one object.
+
+    - `iterations`: nonlinear iterations summed over the step's stages.
+    - `residual_norm`: the largest final nonlinear residual over the stages.
+    - `nonlinear_result`: the first failure among the stages (or `successful`).
+    """
+
+    iterations: Int[Array, ""]
+    residual_norm: Float[Array, ""]
+    nonlinear_result: RESULTS
+
+    @staticmethod
+    def combine(*stats: "StepStats") -> "StepStats":
+        result = stats[0].nonlinear_result
+        for s in stats[1:]:
+            result = RESULTS.where(result == RESULTS.successful, s.nonlinear_result, result)
+        return StepStats(
+            iterations=sum(s.iterations for s in stats),
+            residual_norm=jnp.max(jnp.stack([s.residual_norm for s in stats])),
+            nonlinear_result=result,
+        )
+
+
+class AttemptLog(eqx.Module):
+    """Every attempted step (`save_attempts=True`), in order; entries past `n_attempts` of
+    the solution are padding (`t = inf`)."""
+
+    t: Float[Array, " k"]
+    h: Float[Array, " k"]
+    accepted: Bool[Array, " k"]
+    error_norm: Float[Array, " k"]
+    iterations: Int[Array, " k"]
+    nonlinear_success: Bool[Array, " k"]
+
+
+class Solution(eqx.Module):
+    """The result of [`nivpjax.solve`][].
+
+    Buffers have `max_steps + 1` rows; the first `n_accepted + 1` are the initial point and
+    the accepted steps, the rest are padding (`t = inf`, other entries repeat the last
+    accepted value so that plots and reductions stay finite). Use
+    [`nivpjax.Solution.trimmed`][] on concrete results to drop the padding.
+
+    - `ts`, `ys`: accepted times and states.
+    - `hs`: the step that produced each accepted state (entry 0 is the initial step size).
+    - `multipliers`: the implicit residual at each accepted state (reference: `fk`): the
+      constraint reaction per unit time, e.g. contact impulse / h, friction force, relay
+      multiplier's row; zero (to solver tolerance) on free components.
+    - `iterations`, `residual_norms`, `nonlinear_success`: per accepted step.
+    - `n_accepted`, `n_rejected`, `n_iterations`: counts (iterations include rejected steps).
+    - `result`: a [`nivpjax.RESULTS`][] code.
+    - `t_eval`, `y_eval`: the solution at the requested output times (piecewise-linear
+      interpolation between accepted steps), or `None`.
+    - `attempts`: an [`nivpjax.AttemptLog`][] or `None`.
+    """
+
+    ts: Float[Array, " N"]
+    ys: Float[Array, "N n"]
+    hs: Float[Array, " N"]
+    multipliers: Float[Array, "N n"]
+    iterations: Int[Array, " N"]
+    residual_norms: Float[Array, " N"]
+    nonlinear_success: Bool[Array, " N"]
+    n_accepted: Int[Array, ""]
+    n_rejected: Int[Array, ""]
+    n_iterations: Int[Array, ""]
+    result: RESULTS
+    t_eval: Float[Array, " m"] | None = None
+    y_eval: Float[Array, "m n"] | None = None
+    attempts: AttemptLog | None = None
+
+    @property
+    def t_final(self):
+        return self.ts[self.n_accepted]
+
+    @property
+    def y_final(self):
+        return self.ys[self.n_accepted]
+
+    def trimmed(self) -> "Solution":
+        """A copy with buffers cut to the accepted steps (needs concrete, unbatched values)."""
+        k = int(self.n_accepted) + 1
+        cut = lambda x: x[:k]
+        attempts = self.attempts
+        return Solution(
+            ts=cut(self.ts),
+            ys=cut(self.ys),
+            hs=cut(self.hs),
+            multipliers=cut(self.multipliers),
+            iterations=cut(self.iterations),
+            residual_norms=cut(self.residual_norms),
+            nonlinear_success=cut(self.nonlinear_success),
+            n_accepted=self.n_accepted,
+            n_rejected=self.n_rejected,
+            n_iterations=self.n_iterations,
+            result=self.result,
+            t_eval=self.t_eval,
+            y_eval=self.y_eval,
+            attempts=attempts,
+        )

@@ -1,0 +1,321 @@
+"""`solve`: validate, assemble, run the compiled loop, build the `Solution`."""
+
+import math
+from typing import Any, Literal
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ._controller import AbstractController, PIDController
+from ._loop import interpolate, run
+from ._model import Model
+from ._progress_meter import progress_callback
+from ._projector import AbstractProjector, Identity
+from ._results import RESULTS
+from ._solution import Solution
+from ._stepper import AbstractStepper, Bathe, Richardson
+
+
+class SolveError(RuntimeError):
+    """Raised by [`nivpjax.solve`][] with `throw=True` when the run failed."""
+
+
+def _is_traced(x) -> bool:
+    return any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree.leaves(x))
+
+
+def _concrete_float(name, value):
+    if _is_traced(value):
+        return None
+    arr = np.asarray(value)
+    if arr.shape != ():
+        raise ValueError(f"`{name}` must be a scalar, got shape {arr.shape}.")
+    if not np.issubdtype(arr.dtype, np.number) or np.iscomplexobj(arr):
+        raise TypeError(f"`{name}` must be a real number, got {value!r}.")
+    out = float(arr)
+    if not math.isfinite(out):
+        raise ValueError(f"`{name}` must be finite, got {out}.")
+    return out
+
+
+def _check_y0(y0):
+    if isinstance(y0, (list, tuple)):
+        y0 = np.asarray(y0, dtype=float)
+    if not hasattr(y0, "shape") or not hasattr(y0, "dtype"):
+        raise TypeError(f"`y0` must be an array, got {type(y0).__name__}.")
+    if y0.ndim != 1:
+        raise ValueError(f"`y0` must be a 1-D array of shape (n,), got shape {y0.shape}.")
+    if y0.shape[0] == 0:
+        raise ValueError("`y0` must have at least one component.")
+    if not jnp.issubdtype(y0.dtype, jnp.floating):
+        raise TypeError(
+            f"`y0` must have a floating dtype (float32 or float64), got {y0.dtype}. "
+            "Convert it, e.g. `jnp.asarray(y0, float)`."
+        )
+    if not _is_traced(y0) and not np.all(np.isfinite(np.asarray(y0))):
+        bad = np.flatnonzero(~np.isfinite(np.asarray(y0))).tolist()
+        raise ValueError(f"`y0` contains NaN or inf at components {bad}.")
+    return jnp.asarray(y0)
+
+
+def _check_mass_matrix(mass_matrix, n, dtype):
+    if mass_matrix is None:
+        return None, np.zeros(n, bool)
+    if _is_traced(mass_matrix):
+        raise TypeError(
+            "`mass_matrix` must be a concrete array (its zero rows decide which rows are "
+            "algebraic at trace time); pass it outside `jit`/`vmap` or close over it."
+        )
+    A = np.asarray(mass_matrix, dtype=float)
+    if A.shape != (n, n):
+        raise ValueError(
+            f"`mass_matrix` must have shape (n, n) = ({n}, {n}) to match `y0`, got {A.shape}."
+        )
+    if not np.all(np.isfinite(A)):
+        raise ValueError("`mass_matrix` contains NaN or inf.")
+    algebraic = np.all(A == 0, axis=1)
+    if np.array_equal(A, np.eye(n)):
+        return None, algebraic
+    return jnp.asarray(A, dtype), algebraic
+
+
+def _check_vector_field(vector_field, t0, y0, args):
+    if not callable(vector_field):
+        raise TypeError(f"`vector_field` must be callable f(t, y, args), got {vector_field!r}.")
+    out = jax.eval_shape(vector_field, t0, y0, args)
+    shape = getattr(out, "shape", None)
+    if shape != y0.shape:
+        raise ValueError(
+            f"`vector_field(t, y, args)` must return an array of the same shape as `y0` "
+            f"{y0.shape}, got {shape if shape is not None else type(out).__name__}."
+        )
+
+
+_ADJOINTS = {"checkpointed": "checkpointed", "forward": "lax"}
+
+
+def solve(
+    vector_field,
+    t0,
+    t1,
+    y0,
+    args: Any = None,
+    *,
+    projector: AbstractProjector | None = None,
+    mass_matrix=None,
+    stepper: AbstractStepper | None = None,
+    controller: AbstractController | None = None,
+    h0=None,
+    t_eval=None,
+    max_steps: int = 4096,
+    error_estimate: Literal["auto", "embedded", "richardson"] = "auto",
+    tau: float = 1.0,
+    save_attempts: bool = False,
+    adjoint: Literal["checkpointed", "forward"] = "checkpointed",
+    progress: bool = False,
+    throw: bool = True,
+) -> Solution:
+    r"""Integrate $A y' = f(t, y, \text{args})$, with the nonsmooth rule encoded by
+    `projector`, from `t0` to `t1`.
+
+    Every stage of every step solves the variational inequality $y = P(y - \rho R(y))$ with
+    the stepper's nonlinear solver. The whole loop is one compiled program: `jax.jit`,
+    `jax.vmap` (over `y0`, `args`, `t1`, ...) and reverse-mode `jax.grad` work through it.
+
+    **Arguments:**
+
+    - `vector_field`: $f(t, y, \text{args})$ returning an array shaped like `y0`.
+    - `t0`, `t1`: the interval, `t1 > t0`.
+    - `y0`: the initial state, a 1-D floating array (float32 or float64).
+    - `args`: any pytree of parameters, passed to $f$ and to callable bounds of projectors.
+    - `projector`: an [`nivpjax.AbstractProjector`][]; default [`nivpjax.Identity`][].
+    - `mass_matrix`: the constant descriptor matrix $A$ (concrete, shape `(n, n)`); zero
+      rows are algebraic. Default: the identity.
+    - `stepper`: default [`nivpjax.Bathe`][] with [`nivpjax.SemismoothNewton`][].
+    - `controller`: default [`nivpjax.PIDController`][]`(rtol=1e-3, atol=1e-6)`; use
+      [`nivpjax.ConstantStepSize`][] with `h0` for fixed steps.
+    - `h0`: the initial step (estimated if `None` and the controller is adaptive).
+    - `t_eval`: optional output times in $[t_0, t_1]$; the solution there is interpolated
+      (piecewise linear) into `Solution.y_eval`.
+    - `max_steps`: bound on attempted steps; buffers have `max_steps + 1` rows.
+    - `error_estimate`: `"auto"` uses the stepper's embedded estimate when it has one and
+      Richardson step doubling otherwise; `"richardson"` forces step doubling.
+    - `tau`: scaling of algebraic rows (see [`nivpjax.Model`][]).
+    - `save_attempts`: record every attempted step in `Solution.attempts`.
+    - `adjoint`: `"checkpointed"` (default) supports reverse-mode differentiation;
+      `"forward"` uses a plain `lax.while_loop` (forward mode only, a little faster).
+    - `progress`: print a progress bar to stderr.
+    - `throw`: raise [`nivpjax.SolveError`][] if the run failed (`max_steps` reached, step
+      size below `h_min`, repeated nonlinear failures). With `False` the failure is only in
+      `Solution.result` (per member under `vmap`). Under `jit`/`vmap` the error is raised
+      through `equinox.error_if`.
+
+    **Returns:** a [`nivpjax.Solution`][].
+
+    **Raises:** `ValueError`/`TypeError` for bad input, before any work.
+    """
+    y0 = _check_y0(y0)
+    n = y0.shape[0]
+    dtype = y0.dtype
+    t0_c = _concrete_float("t0", t0)
+    t1_c = _concrete_float("t1", t1)
+    if t0_c is not None and t1_c is not None and not t1_c > t0_c:
+        raise ValueError(f"`t1` must be greater than `t0`, got t0={t0_c}, t1={t1_c}.")
+    if not isinstance(max_steps, int) or isinstance(max_steps, bool) or max_steps < 1:
+        raise ValueError(f"`max_steps` must be a positive int, got {max_steps!r}.")
+    if projector is None:
+        projector = Identity()
+    if not isinstance(projector, AbstractProjector):
+        raise TypeError(f"`projector` must be an AbstractProjector, got {projector!r}.")
+    if stepper is None:
+        stepper = Bathe()
+    if not isinstance(stepper, AbstractStepper):
+        raise TypeError(
+            f"`stepper` must be an AbstractStepper (e.g. nivpjax.BackwardEuler()), got {stepper!r}."
+        )
+    if controller is None:
+        controller = PIDController()
+    if not isinstance(controller, AbstractController):
+        raise TypeError(f"`controller` must be an AbstractController, got {controller!r}.")
+    if error_estimate not in ("auto", "embedded", "richardson"):
+        raise ValueError(
+            "`error_estimate` must be one of 'auto', 'embedded', 'richardson', got "
+            f"{error_estimate!r}."
+        )
+    if adjoint not in _ADJOINTS:
+        raise ValueError(f"`adjoint` must be 'checkpointed' or 'forward', got {adjoint!r}.")
+    if not (isinstance(tau, (int, float)) and tau > 0 and math.isfinite(tau)):
+        raise ValueError(f"`tau` must be a positive float, got {tau!r}.")
+    if h0 is not None:
+        h0_c = _concrete_float("h0", h0)
+        if h0_c is not None and not h0_c > 0:
+            raise ValueError(f"`h0` must be positive, got {h0_c}.")
+    h_min, h_max = controller.bounds
+    if h_min is not None and h_min < 0:
+        raise ValueError(f"`h_min` must be non-negative, got {h_min}.")
+    if h_max is not None and not h_max > 0:
+        raise ValueError(f"`h_max` must be positive, got {h_max}.")
+    if h_min is not None and h_max is not None and h_min > h_max:
+        raise ValueError(f"`h_min` must not exceed `h_max`, got {h_min} > {h_max}.")
+
+    if controller.needs_error_estimate:
+        if error_estimate == "embedded" and stepper.error_order == 0:
+            raise ValueError(
+                f"{type(stepper).__name__} has no embedded error estimate; use "
+                "error_estimate='richardson' or 'auto', or nivpjax.EmbeddedBETR."
+            )
+        if error_estimate == "richardson" or stepper.error_order == 0:
+            stepper = Richardson(stepper)
+
+    mass, algebraic = _check_mass_matrix(mass_matrix, n, dtype)
+    t0 = jnp.asarray(t0, dtype)
+    t1 = jnp.asarray(t1, dtype)
+    _check_vector_field(vector_field, t0, y0, args)
+    error_mask = getattr(controller, "error_mask", None)
+    if error_mask is None:
+        error_mask = ~algebraic
+    else:
+        error_mask = np.asarray(error_mask, bool)
+        if error_mask.shape != (n,):
+            raise ValueError(
+                f"`error_mask` must be a boolean array of shape ({n},), got {error_mask.shape}."
+            )
+    if t_eval is not None:
+        t_eval = jnp.atleast_1d(jnp.asarray(t_eval, dtype))
+        if t_eval.ndim != 1:
+            raise ValueError(f"`t_eval` must be 1-D, got shape {t_eval.shape}.")
+        if not _is_traced(t_eval) and t0_c is not None and t1_c is not None:
+            te = np.asarray(t_eval)
+            if np.any(np.diff(te) < 0) or te.min() < t0_c or te.max() > t1_c:
+                raise ValueError("`t_eval` must be sorted and lie within [t0, t1].")
+
+    model = Model(
+        vector_field=vector_field,
+        projector=projector,
+        mass_matrix=mass,
+        algebraic=jnp.asarray(algebraic),
+        tau=float(tau),
+    )
+    traced = _is_traced((y0, t0, t1, args, t_eval, h0))
+    sol = _solve_jit(
+        model,
+        stepper,
+        controller,
+        t0,
+        t1,
+        y0,
+        args,
+        h0,
+        jnp.asarray(error_mask),
+        t_eval,
+        max_steps,
+        save_attempts,
+        _ADJOINTS[adjoint],
+        progress,
+        throw and traced,
+    )
+    if throw and not traced:
+        _raise_if_failed(sol)
+    return sol
+
+
+@eqx.filter_jit
+def _solve_jit(
+    model,
+    stepper,
+    controller,
+    t0,
+    t1,
+    y0,
+    args,
+    h0,
+    error_mask,
+    t_eval,
+    max_steps,
+    save_attempts,
+    kind,
+    progress,
+    throw_inside,
+):
+    meter = progress_callback(t0, t1) if progress else None
+    y0 = eqx.error_if(y0, ~jnp.all(jnp.isfinite(y0)), "`y0` contains NaN or inf.")
+    y0 = eqx.error_if(y0, ~(t1 > t0), "`t1` must be greater than `t0`.")
+    sol = run(
+        model, stepper, controller, t0, t1, y0, args, h0, error_mask, max_steps,
+        save_attempts, kind, meter,
+    )
+    if t_eval is not None:
+        sol = eqx.tree_at(
+            lambda s: (s.t_eval, s.y_eval),
+            sol,
+            (t_eval, interpolate(sol, t_eval)),
+            is_leaf=lambda x: x is None,
+        )
+    if throw_inside:
+        sol = sol.result.error_if(sol, sol.result != RESULTS.successful)
+    return sol
+
+
+def _raise_if_failed(sol: Solution):
+    result = sol.result
+    if np.ndim(result._value) != 0:
+        failed = np.flatnonzero(np.asarray(result._value) != RESULTS.successful._value)
+        if failed.size:
+            raise SolveError(
+                f"{failed.size} batch member(s) failed (indices {failed[:10].tolist()}"
+                f"{'...' if failed.size > 10 else ''}); pass throw=False and inspect "
+                "`Solution.result` per member."
+            )
+        return
+    if result == RESULTS.successful:
+        return
+    k = int(sol.n_accepted)
+    t = float(sol.ts[k])
+    h = float(sol.hs[k]) if k > 0 else float("nan")
+    message = RESULTS[result]
+    raise SolveError(
+        f"nivpjax.solve failed at t = {t:.10g} after {k} accepted and "
+        f"{int(sol.n_rejected)} rejected steps (last accepted step size {h:.3g}): {message}"
+    )

@@ -1,0 +1,34 @@
+"""Richardson step doubling: an error estimate for any stepper."""
+
+from .._solution import StepStats
+from .base import AbstractStepper, StepOutput
+
+
+class Richardson(AbstractStepper):
+    r"""Wrap a stepper of order $p$: take one step of size $h$ and two of size $h/2$, and
+    estimate the error of the two half steps as $(y_{h/2,h/2} - y_h)/(2^p - 1)$
+    (`error_order` $p + 1$). The two half steps are propagated. Costs three steps per step.
+    """
+
+    stepper: AbstractStepper
+
+    @property
+    def solver(self):
+        return self.stepper.solver
+
+    @property
+    def order(self) -> int:
+        return self.stepper.order
+
+    @property
+    def error_order(self) -> int:
+        return self.stepper.order + 1
+
+    def step(self, model, t0, h, y0, args):
+        full = self.stepper.step(model, t0, h, y0, args)
+        half1 = self.stepper.step(model, t0, 0.5 * h, y0, args)
+        half2 = self.stepper.step(model, t0 + 0.5 * h, 0.5 * h, half1.y1, args)
+        p = self.stepper.order
+        y_error = (half2.y1 - full.y1) / (2.0**p - 1.0)
+        stats = StepStats.combine(full.stats, half1.stats, half2.stats)
+        return StepOutput(y1=half2.y1, y_error=y_error, multipliers=half2.multipliers, stats=stats)
