@@ -63,13 +63,12 @@ class FixedPointVI(AbstractNonlinearSolver):
             accept = finite & (L <= self.nu)
             natural = step / jnp.minimum(1.0, alpha)
             done = accept & (scaled_error(natural, y, rtol, atol) <= 1)
-            # At convergence the predictor is already within tolerance; keep it (one
-            # residual evaluation cheaper and never worse than the corrector here).
+            # At convergence keep y itself: its natural residual is the certified one.
             y_plus = project(y - alpha * rho * R_bar, y_bar, alpha * rho)
-            y_plus = jnp.where(done, y_bar, y_plus)
-            R_plus = jnp.where(done, R_bar, residual(y_plus))
-            y_new = jnp.where(accept, y_plus, y)
-            R_new = jnp.where(accept, R_plus, R)
+            R_plus = residual(y_plus)
+            move = accept & ~done
+            y_new = jnp.where(move, y_plus, y)
+            R_new = jnp.where(move, R_plus, R)
             shrink = 0.9 * jnp.maximum(self.shrink, self.nu / jnp.where(L > 0, L, 1.0))
             shrink = jnp.where(finite, shrink, self.shrink)
             grown = jnp.minimum(alpha * self.grow, self.alpha_max)

@@ -1,0 +1,258 @@
+"""Semismooth Newton and the VI method on single implicit steps with exact solutions."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import nivpjax as nj
+
+
+NEWTON = nj.SemismoothNewton(rtol=1e-13, atol=1e-13)
+VI = nj.FixedPointVI(rtol=1e-13, atol=1e-13, max_steps=2000)
+SOLVERS = {"newton": NEWTON, "vi": VI}
+
+
+def _ctx_projector(projector):
+    def project(z, y, rho):
+        ctx = nj.ProjectionContext(
+            t=jnp.zeros(()), h=jnp.ones(()), y_prev=y, y_iter=y, rho=rho, args=None
+        )
+        return projector(z, ctx)
+
+    return project
+
+
+# --- Relay: x' = -w + d, w in sign(x), one backward Euler step ------------------------------
+RELAY_P = _ctx_projector(nj.BlockProjector([([1], nj.Box(-1.0, 1.0))]))
+
+
+def relay_step(solver, xn, d, h):
+    def residual(y):
+        x, w = y
+        return jnp.stack([(x - xn) / h - (-w + d), -x])
+
+    dtype = jnp.result_type(xn)
+    rho = jnp.array([h, 1.0 / h], dtype)
+    return solver.solve(residual, RELAY_P, rho, jnp.zeros(2, dtype))
+
+
+relay_step_jit = jax.jit(relay_step, static_argnums=0)
+
+
+@pytest.mark.parametrize("name", SOLVERS)
+@pytest.mark.parametrize(
+    "xn, d, h, expected",
+    [
+        # sliding: x = 0, w = d + xn/h inside (-1, 1)
+        (0.05, 0.3, 0.1, (0.0, 0.8)),
+        # slipping: w = 1, x = xn + h(d - 1) > 0
+        (0.5, 0.3, 0.1, (0.5 + 0.1 * (0.3 - 1.0), 1.0)),
+        # slipping from below: w = -1
+        (-0.5, 0.3, 0.1, (-0.5 + 0.1 * (0.3 + 1.0), -1.0)),
+    ],
+)
+def test_relay_step(name, xn, d, h, expected):
+    sol = relay_step_jit(SOLVERS[name], xn, d, h)
+    assert sol.result == nj.RESULTS.successful
+    np.testing.assert_allclose(sol.value, expected, rtol=0, atol=1e-10)
+    assert sol.residual_norm <= 1e-10
+
+
+# --- Unilateral contact: ball on the floor, backward Euler step ------------------------------
+G = 9.81
+
+
+def contact_step(solver, q0, v0, e, h):
+    projector = _ctx_projector_prev(
+        nj.UnilateralContact(
+            gap=lambda t, y, a: y[:1],
+            velocity_map=lambda t, y, a: jnp.array([[0.0, 1.0]]),
+            restitution=e,
+        ),
+        jnp.stack([q0, v0]),
+        h,
+    )
+
+    def residual(y):
+        q, v = y
+        return jnp.stack([(q - q0) / h - v, (v - v0) / h + G])
+
+    return solver.solve(residual, projector, jnp.full(2, h), jnp.stack([q0, v0]))
+
+
+def _ctx_projector_prev(projector, y_prev, h):
+    def project(z, y, rho):
+        ctx = nj.ProjectionContext(
+            t=jnp.zeros(()), h=jnp.asarray(h), y_prev=y_prev, y_iter=y, rho=rho, args=None
+        )
+        return projector(z, ctx)
+
+    return project
+
+
+contact_step_jit = jax.jit(contact_step, static_argnums=0)
+
+
+@pytest.mark.parametrize("name", SOLVERS)
+@pytest.mark.parametrize("e", [0.0, 0.5, 1.0])
+def test_contact_step_impact(name, e):
+    q0, v0, h = 1e-3, -1.0, 0.01
+    sol = contact_step_jit(SOLVERS[name], jnp.array(q0), jnp.array(v0), e, h)
+    assert sol.result == nj.RESULTS.successful
+    # Newton's impact law: post-impact velocity -e v0; the position follows it.
+    np.testing.assert_allclose(sol.value, [q0 + h * (-e * v0), -e * v0], rtol=0, atol=1e-10)
+
+
+@pytest.mark.parametrize("name", SOLVERS)
+def test_contact_step_resting(name):
+    h = 0.01
+    sol = contact_step_jit(SOLVERS[name], jnp.array(0.0), jnp.array(0.0), 0.5, h)
+    assert sol.result == nj.RESULTS.successful
+    np.testing.assert_allclose(sol.value, [0.0, 0.0], atol=1e-10)
+
+
+@pytest.mark.parametrize("name", SOLVERS)
+def test_contact_step_free_flight(name):
+    # Predicted gap positive: the projector is the identity, an ordinary BE step.
+    h, q0, v0 = 0.01, 1.0, -1.0
+    sol = contact_step_jit(SOLVERS[name], jnp.array(q0), jnp.array(v0), 0.5, h)
+    v = v0 - h * G
+    np.testing.assert_allclose(sol.value, [q0 + h * v, v], atol=1e-10)
+
+
+# --- Second-order-cone friction: impact with friction (De Saxce's formulation) ----------------
+def _safe_norm(x):
+    sq = jnp.sum(x**2)
+    return jnp.where(sq > 0, jnp.sqrt(jnp.where(sq > 0, sq, 1.0)), 0.0)
+
+
+def soc_step(solver, v0, mu, h=1.0):
+    """y = (v_n, v_t1, v_t2, lam_n, lam_t1, lam_t2). Velocity rows: (v - v0)/h - lam = 0;
+    impulse rows (algebraic): lam in K_mu and the modified velocity
+    (v_n + mu |v_t|, v_t) in the dual cone, orthogonal to lam."""
+    projector = _ctx_projector(nj.BlockProjector([([3, 4, 5], nj.SecondOrderCone(mu))]))
+
+    def residual(y):
+        v, lam = y[:3], y[3:]
+        u_hat = jnp.concatenate([v[:1] + mu * _safe_norm(v[1:]), v[1:]])
+        return jnp.concatenate([(v - v0) / h - lam, u_hat])
+
+    rho = jnp.concatenate([jnp.full(3, h), jnp.full(3, 1.0 / h)])
+    return solver.solve(residual, projector, rho, jnp.zeros(6))
+
+
+soc_step_jit = jax.jit(soc_step, static_argnums=0)
+
+
+@pytest.mark.parametrize("name", SOLVERS)
+def test_soc_step_sliding(name):
+    mu = 0.3
+    sol = soc_step_jit(SOLVERS[name], jnp.array([-1.0, 2.0, 0.0]), mu)
+    assert sol.result == nj.RESULTS.successful
+    # Normal velocity stopped by lam_n = 1; the tangential impulse is mu * lam_n opposing slip.
+    np.testing.assert_allclose(sol.value, [0.0, 1.7, 0.0, 1.0, -0.3, 0.0], atol=1e-10)
+
+
+@pytest.mark.parametrize("name", SOLVERS)
+def test_soc_step_sticking(name):
+    mu = 0.3
+    sol = soc_step_jit(SOLVERS[name], jnp.array([-1.0, 0.2, 0.1]), mu)
+    assert sol.result == nj.RESULTS.successful
+    # |v_t| = 0.224 < mu * lam_n = 0.3: friction stops the slip.
+    np.testing.assert_allclose(sol.value, [0.0, 0.0, 0.0, 1.0, -0.2, -0.1], atol=1e-10)
+
+
+# --- Convergence behaviour -------------------------------------------------------------------
+def test_newton_superlinear():
+    """Residual history of semismooth Newton on a nonlinear step with an active friction cone:
+    the ratio of successive residuals tends to zero."""
+    mu = 0.3
+    projector = _ctx_projector(nj.BlockProjector([([2, 3], nj.SecondOrderCone(mu))]))
+    v0 = jnp.array([-1.0, 2.0])
+
+    def residual(y):
+        v, lam = y[:2], y[2:]
+        # A nonlinear (cubic) damping on both velocity components.
+        smooth = (v - v0) + 0.5 * v**3 - lam
+        u_hat = jnp.stack([v[0] + mu * jnp.abs(v[1]), v[1]])
+        return jnp.concatenate([smooth, u_hat])
+
+    sol = jax.jit(NEWTON.solve, static_argnums=(0, 1))(
+        residual, projector, jnp.ones(4), jnp.zeros(4)
+    )
+    assert sol.result == nj.RESULTS.successful
+    k = int(sol.iterations)
+    r = np.asarray(sol.history[: k + 1])
+    assert 3 <= k <= 12, r
+    ratios = r[1:] / r[:-1]
+    # Superlinear: the last two contraction ratios are small and shrinking.
+    assert ratios[-1] < 1e-2, ratios
+    assert ratios[-1] < ratios[-2], ratios
+    assert r[-1] < 1e-12
+
+
+def test_vi_reports_failure_with_small_budget():
+    solver = nj.FixedPointVI(rtol=1e-13, atol=1e-13, max_steps=3)
+    sol = soc_step(solver, jnp.array([-1.0, 2.0, 0.0]), 0.3)
+    assert sol.result == nj.RESULTS.nonlinear_max_steps_reached
+    assert np.isfinite(sol.residual_norm) and sol.residual_norm > 1e-13
+    assert int(sol.iterations) == 3
+
+
+def test_newton_reports_failure_with_small_budget():
+    solver = nj.SemismoothNewton(rtol=1e-14, atol=1e-14, max_steps=1)
+    sol = soc_step(solver, jnp.array([-1.0, 2.0, 0.0]), 0.3)
+    assert sol.result != nj.RESULTS.successful
+    assert np.all(np.isfinite(sol.value))
+
+
+# --- Implicit-function gradients -------------------------------------------------------------
+def _fd(f, x, eps=1e-6):
+    return (f(x + eps) - f(x - eps)) / (2 * eps)
+
+
+@pytest.mark.parametrize("name", SOLVERS)
+def test_gradient_relay_sliding(name):
+    """In sliding, w = d + xn/h: dw/dd = 1, dw/dxn = 1/h, exactly."""
+    h = 0.1
+    w = lambda d, xn: relay_step(SOLVERS[name], xn, d, h).value[1]
+    gd, gx = jax.grad(w, argnums=(0, 1))(0.3, 0.05)
+    np.testing.assert_allclose([gd, gx], [1.0, 1.0 / h], rtol=1e-10)
+
+
+@pytest.mark.parametrize("name", SOLVERS)
+def test_gradient_soc_sliding_matches_fd(name):
+    def out(mu, v0t):
+        v = soc_step(SOLVERS[name], jnp.stack([-1.0, v0t, 0.5]), mu).value
+        return v[1] + 2.0 * v[4]
+
+    f_mu = jax.jit(lambda mu: out(mu, 2.0))
+    f_v = jax.jit(lambda v0t: out(0.3, v0t))
+    g_mu, g_v = jax.grad(out, argnums=(0, 1))(0.3, 2.0)
+    np.testing.assert_allclose(g_mu, _fd(f_mu, 0.3), rtol=1e-6)
+    np.testing.assert_allclose(g_v, _fd(f_v, 2.0), rtol=1e-6)
+
+
+def test_gradient_contact_restitution():
+    """Post-impact velocity -e v0: d/de = -v0, d/dv0 = -e (forward and reverse mode)."""
+    f = lambda e, v0: contact_step(NEWTON, jnp.array(1e-3), v0, e, 0.01).value[1]
+    ge, gv = jax.grad(f, argnums=(0, 1))(0.5, -1.0)
+    np.testing.assert_allclose([ge, gv], [1.0, -0.5], rtol=1e-10)
+    jf = jax.jacfwd(f, argnums=0)(0.5, -1.0)
+    np.testing.assert_allclose(jf, 1.0, rtol=1e-10)
+
+
+def test_solvers_vmap_matches_loop():
+    ds = jnp.linspace(-0.9, 0.9, 7)
+    batched = jax.vmap(lambda d: relay_step(NEWTON, 0.05, d, 0.1).value)(ds)
+    looped = jnp.stack([relay_step_jit(NEWTON, 0.05, d, 0.1).value for d in ds])
+    np.testing.assert_allclose(batched, looped, atol=1e-14)
+
+
+def test_float32_relay():
+    solver = nj.SemismoothNewton()  # default tolerances get clamped to float32's resolution
+    sol = relay_step(solver, jnp.float32(0.05), jnp.float32(0.3), jnp.float32(0.1))
+    assert sol.value.dtype == jnp.float32
+    assert sol.result == nj.RESULTS.successful
+    np.testing.assert_allclose(sol.value, [0.0, 0.8], atol=1e-5)
