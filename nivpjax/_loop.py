@@ -66,9 +66,7 @@ def _log_attempt(log: AttemptLog, i, t, h, accepted, err, stats):
         accepted=put(log.accepted, accepted),
         error_norm=put(log.error_norm, err),
         iterations=put(log.iterations, stats.iterations.astype(jnp.int32)),
-        nonlinear_success=put(
-            log.nonlinear_success, stats.nonlinear_result == RESULTS.successful
-        ),
+        nonlinear_success=put(log.nonlinear_success, stats.nonlinear_result == RESULTS.successful),
     )
 
 
@@ -146,9 +144,7 @@ def run(
         at_floor = h_try <= h_min * (1 + 1e-6)
         floor_failure = ~accept & at_floor
         nonlinear_ok = out.stats.nonlinear_result == RESULTS.successful
-        failure_code = RESULTS.where(
-            nonlinear_ok, RESULTS.h_min_reached, RESULTS.nonlinear_failure
-        )
+        failure_code = RESULTS.where(nonlinear_ok, RESULTS.h_min_reached, RESULTS.nonlinear_failure)
         result = RESULTS.where(floor_failure, failure_code, s.result)
         h_next = jnp.maximum(h_next, h_min)
         if h_max is not None:
@@ -188,9 +184,7 @@ def run(
             attempts=attempts,
         )
 
-    final = eqxi.while_loop(
-        cond, body, state, max_steps=max_steps, buffers=_buffers, kind=kind
-    )
+    final = eqxi.while_loop(cond, body, state, max_steps=max_steps, buffers=_buffers, kind=kind)
     result = RESULTS.where(
         (final.result == RESULTS.successful) & (final.t < t1),
         RESULTS.time_max_steps_reached,
@@ -210,6 +204,8 @@ def run(
         iterations=jnp.where(pad, 0, final.iterations),
         residual_norms=jnp.where(pad, 0.0, final.residual_norms),
         nonlinear_success=jnp.where(pad, True, final.nonlinear_success),
+        t_final=final.t,
+        y_final=final.y,
         n_accepted=k,
         n_rejected=final.n_rejected,
         n_iterations=final.n_iterations,

@@ -57,6 +57,7 @@ class Solution(eqx.Module):
       constraint reaction per unit time, e.g. contact impulse / h, friction force, relay
       multiplier's row; zero (to solver tolerance) on free components.
     - `iterations`, `residual_norms`, `nonlinear_success`: per accepted step.
+    - `t_final`, `y_final`: where the run ended (`t1` unless it failed).
     - `n_accepted`, `n_rejected`, `n_iterations`: counts (iterations include rejected steps).
     - `result`: a [`nivpjax.RESULTS`][] code.
     - `t_eval`, `y_eval`: the solution at the requested output times (piecewise-linear
@@ -71,6 +72,8 @@ class Solution(eqx.Module):
     iterations: Int[Array, " N"]
     residual_norms: Float[Array, " N"]
     nonlinear_success: Bool[Array, " N"]
+    t_final: Float[Array, ""]
+    y_final: Float[Array, " n"]
     n_accepted: Int[Array, ""]
     n_rejected: Int[Array, ""]
     n_iterations: Int[Array, ""]
@@ -78,14 +81,6 @@ class Solution(eqx.Module):
     t_eval: Float[Array, " m"] | None = None
     y_eval: Float[Array, "m n"] | None = None
     attempts: AttemptLog | None = None
-
-    @property
-    def t_final(self):
-        return self.ts[self.n_accepted]
-
-    @property
-    def y_final(self):
-        return self.ys[self.n_accepted]
 
     def trimmed(self) -> "Solution":
         """A copy with buffers cut to the accepted steps (needs concrete, unbatched values)."""
@@ -100,6 +95,8 @@ class Solution(eqx.Module):
             iterations=cut(self.iterations),
             residual_norms=cut(self.residual_norms),
             nonlinear_success=cut(self.nonlinear_success),
+            t_final=self.t_final,
+            y_final=self.y_final,
             n_accepted=self.n_accepted,
             n_rejected=self.n_rejected,
             n_iterations=self.n_iterations,

@@ -283,8 +283,19 @@ def _solve_jit(
     y0 = eqx.error_if(y0, ~jnp.all(jnp.isfinite(y0)), "`y0` contains NaN or inf.")
     y0 = eqx.error_if(y0, ~(t1 > t0), "`t1` must be greater than `t0`.")
     sol = run(
-        model, stepper, controller, t0, t1, y0, args, h0, error_mask, max_steps,
-        save_attempts, kind, meter,
+        model,
+        stepper,
+        controller,
+        t0,
+        t1,
+        y0,
+        args,
+        h0,
+        error_mask,
+        max_steps,
+        save_attempts,
+        kind,
+        meter,
     )
     if t_eval is not None:
         sol = eqx.tree_at(

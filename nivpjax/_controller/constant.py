@@ -2,6 +2,7 @@
 
 import jax.numpy as jnp
 
+from .._results import RESULTS
 from .base import AbstractController, StepInfo
 
 
@@ -27,7 +28,7 @@ class ConstantStepSize(AbstractController):
         return h, h
 
     def adapt(self, info: StepInfo, state):
-        ok = info.stats.nonlinear_result == info.stats.nonlinear_result.successful
+        ok = info.stats.nonlinear_result == RESULTS.successful
         ok = ok & jnp.all(jnp.isfinite(info.y1))
         h_next = jnp.where(ok, state, 0.5 * info.h)
         return ok, h_next, state

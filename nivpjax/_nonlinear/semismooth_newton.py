@@ -48,8 +48,10 @@ class SemismoothNewton(AbstractNonlinearSolver):
 
         def cond(carry):
             y, g, k, history = carry
-            return (k < self.max_steps) & (scaled_error(g, y, rtol, atol) > 1) & jnp.all(
-                jnp.isfinite(g)
+            return (
+                (k < self.max_steps)
+                & (scaled_error(g, y, rtol, atol) > 1)
+                & jnp.all(jnp.isfinite(g))
             )
 
         def body(carry):

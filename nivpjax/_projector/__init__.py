@@ -5,11 +5,11 @@ from .base import (
     default_context as default_context,
 )
 from .block import BlockProjector as BlockProjector
-from .box import Box as Box, clip as clip, NonNegative as NonNegative
+from .box import Box as Box, NonNegative as NonNegative, clip as clip
 from .contact import UnilateralContact as UnilateralContact
 from .coulomb import CoulombFriction as CoulombFriction
 from .custom import CustomProjector as CustomProjector
 from .identity import Identity as Identity
 from .lcp import lcp_solve as lcp_solve
 from .sign import SignResolvent as SignResolvent
-from .soc import project_soc as project_soc, SecondOrderCone as SecondOrderCone
+from .soc import SecondOrderCone as SecondOrderCone, project_soc as project_soc

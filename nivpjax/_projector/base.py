@@ -40,9 +40,7 @@ def default_context(z: Array, args: PyTree[Any] = None) -> ProjectionContext:
     z = jnp.asarray(z)
     zero = jnp.zeros((), z.dtype)
     one = jnp.ones((), z.dtype)
-    return ProjectionContext(
-        t=zero, h=one, y_prev=z, y_iter=z, rho=jnp.ones_like(z), args=args
-    )
+    return ProjectionContext(t=zero, h=one, y_prev=z, y_iter=z, rho=jnp.ones_like(z), args=args)
 
 
 class AbstractProjector(eqx.Module):

@@ -31,8 +31,7 @@ class BlockProjector(AbstractProjector):
                 indices, projector = entry
             except (TypeError, ValueError):
                 raise TypeError(
-                    "`blocks` must be a sequence of `(indices, projector)` pairs, got "
-                    f"{entry!r}."
+                    f"`blocks` must be a sequence of `(indices, projector)` pairs, got {entry!r}."
                 ) from None
             idx = tuple(int(i) for i in np.atleast_1d(np.asarray(indices, dtype=int)))
             if not isinstance(projector, AbstractProjector):

@@ -62,7 +62,9 @@ def lcp_solve(D, q):
 
     scale = 1.0 + jnp.max(jnp.abs(q), initial=0.0)
     needs_pgs = _lcp_residual(D, q, p) > 1e3 * jnp.finfo(q.dtype).eps * scale
-    p = lax.cond(needs_pgs, lambda p: lax.scan(pgs_sweep, p, None, length=50 * m)[0], lambda p: p, p)
+    p = lax.cond(
+        needs_pgs, lambda p: lax.scan(pgs_sweep, p, None, length=50 * m)[0], lambda p: p, p
+    )
     return p
 
 

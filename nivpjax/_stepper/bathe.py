@@ -4,7 +4,7 @@ import equinox as eqx
 
 from .._nonlinear import AbstractNonlinearSolver
 from .._solution import StepStats
-from .base import AbstractStepper, default_solver, stats_of, StepOutput
+from .base import AbstractStepper, StepOutput, default_solver, stats_of
 
 
 class Bathe(AbstractStepper):

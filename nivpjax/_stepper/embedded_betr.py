@@ -4,7 +4,7 @@ import equinox as eqx
 
 from .._nonlinear import AbstractNonlinearSolver
 from .._solution import StepStats
-from .base import AbstractStepper, default_solver, stats_of, StepOutput
+from .base import AbstractStepper, StepOutput, default_solver, stats_of
 
 
 class EmbeddedBETR(AbstractStepper):
@@ -22,8 +22,7 @@ class EmbeddedBETR(AbstractStepper):
     def __check_init__(self):
         if self.propagate not in ("backward_euler", "trapezoidal"):
             raise ValueError(
-                "`propagate` must be 'backward_euler' or 'trapezoidal', got "
-                f"{self.propagate!r}."
+                f"`propagate` must be 'backward_euler' or 'trapezoidal', got {self.propagate!r}."
             )
 
     @property
@@ -44,6 +43,4 @@ class EmbeddedBETR(AbstractStepper):
         else:
             y1, multipliers = tr.value, mult_tr
         stats = StepStats.combine(stats_of(be), stats_of(tr))
-        return StepOutput(
-            y1=y1, y_error=tr.value - be.value, multipliers=multipliers, stats=stats
-        )
+        return StepOutput(y1=y1, y_error=tr.value - be.value, multipliers=multipliers, stats=stats)

@@ -3,7 +3,7 @@
 import equinox as eqx
 
 from .._nonlinear import AbstractNonlinearSolver
-from .base import AbstractStepper, default_solver, stats_of, StepOutput
+from .base import AbstractStepper, StepOutput, default_solver, stats_of
 
 
 class _AbstractTheta(AbstractStepper):
@@ -17,9 +17,7 @@ class _AbstractTheta(AbstractStepper):
     def step(self, model, t0, h, y0, args):
         t1 = t0 + h
         f0 = None if self.theta == 1.0 else model.f(t0, y0, args)
-        sol, multipliers = model.solve_stage(
-            self.solver, t1, h, y0, f0, self.theta, y0, y0, args
-        )
+        sol, multipliers = model.solve_stage(self.solver, t1, h, y0, f0, self.theta, y0, y0, args)
         return StepOutput(y1=sol.value, y_error=None, multipliers=multipliers, stats=stats_of(sol))
 
 
