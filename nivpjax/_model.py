@@ -40,8 +40,9 @@ class Model(eqx.Module):
 
     def solve_stage(self, solver, t_end, h_eff, y_base, f_explicit, theta, y_prev, guess, args):
         r"""Solve one one-leg stage: find $y$ with, on differential rows,
-        $A(y - y_{\text{base}})/h_{\text{eff}} = \theta f(t_{\text{end}}, y) + (1-\theta) f_{\text{explicit}}$,
-        on algebraic rows $0 = f(t_{\text{end}}, y)$, subject to the projector.
+        $A(y - y_b)/h_e = \theta f(t_e, y) + (1-\theta) f_x$ ($y_b$ = `y_base`,
+        $h_e$ = `h_eff`, $t_e$ = `t_end`, $f_x$ = `f_explicit`), on algebraic rows
+        $0 = f(t_e, y)$, subject to the projector.
 
         Returns the nonlinear solution and the stage residual at the solution (the
         constraint reaction per unit time: forces, contact impulses divided by $h$)."""
