@@ -120,7 +120,9 @@ def run(
 
     def body(s: _LoopState):
         remaining = t1 - s.t
-        last = s.h >= remaining
+        # Land on t1 rather than leave a remainder below h_min (float accumulation of
+        # fixed steps would otherwise leave a step of a few ulps).
+        last = s.h >= remaining - h_min
         h_try = jnp.where(last, remaining, s.h)
         # A finished member of a vmapped batch still runs this body (its result is
         # discarded); keep its step finite so nothing divides by zero, even in reverse mode.
@@ -128,6 +130,7 @@ def run(
         h_try = jax.lax.stop_gradient(h_try)
         out = stepper.step(model, s.t, h_try, s.y, args)
         y_error = jnp.zeros_like(out.y1) if out.y_error is None else out.y_error
+        violation = model.violation(s.t + h_try, h_try, s.y, out.y1, args)
         info = StepInfo(
             t0=s.t,
             h=h_try,
@@ -138,6 +141,7 @@ def run(
             error_order=error_order,
             stats=out.stats,
             error_mask=error_mask,
+            violation=violation,
         )
         accept, h_next, controller_state = controller.adapt(info, s.controller_state)
         accept = accept & jnp.all(jnp.isfinite(out.y1))

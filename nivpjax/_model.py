@@ -65,3 +65,15 @@ class Model(eqx.Module):
 
         sol = solver.solve(residual, project, rho, guess)
         return sol, residual(sol.value)
+
+    def _context(self, t, h, y0, y1, args):
+        rho = jnp.full_like(y1, h)
+        return ProjectionContext(t=t, h=h, y_prev=y0, y_iter=y1, rho=rho, args=args)
+
+    def violation(self, t1, h, y0, y1, args):
+        """Constraint violation at the end of a step (see `AbstractProjector.violation`)."""
+        return self.projector.violation(self._context(t1, h, y0, y1, args))
+
+    def impulsive(self, t1, h, y0, y1, args):
+        """Whether a stage from `y0` to `y1` contained an impulse."""
+        return self.projector.impulsive(self._context(t1, h, y0, y1, args))

@@ -50,13 +50,15 @@ def context(z, *, y_iter=None, y_prev=None, rho=None, args=None, h=1.0):
 
 
 def jacobian_fns(f, argnums):
-    """`f`, `jacfwd(f)` and `jacrev(f)` with respect to `argnums`, each jitted once."""
-    return jax.jit(f), jax.jit(jax.jacfwd(f, argnums)), jax.jit(jax.jacrev(f, argnums))
+    """`f` and `(jacfwd(f), jacrev(f))` with respect to `argnums`, each jitted once (one
+    compilation per input shape)."""
+    both = lambda *args: (jax.jacfwd(f, argnums)(*args), jax.jacrev(f, argnums)(*args))
+    return jax.jit(f), jax.jit(both)
 
 
 def assert_jacobians_match_fd(fns, args, argnums):
-    f, jac_fwd, jac_rev = fns
-    fwd, rev = jac_fwd(*args), jac_rev(*args)
+    f, jacobians = fns
+    fwd, rev = jacobians(*args)
     for k, i in enumerate(argnums):
         fd = fd_jacobian(f, args, i)
         np.testing.assert_allclose(fwd[k], fd, rtol=FD_RTOL, atol=FD_ATOL)
@@ -241,9 +243,9 @@ def test_variational_inequality(name, data):
     # of P(x') is checked by test_output_in_set).
     case = SETS[name]
     z = data.draw(vectors(case.dim, -4, 4))
-    x = case.apply(data.draw(vectors(case.dim, -4, 4)))
-    p = case.apply(z)
-    assert jnp.dot(z - p, x - p) <= 1e-10 * (1 + np.max(np.abs(z))) ** 2
+    x = np.asarray(case.apply(data.draw(vectors(case.dim, -4, 4))))
+    p = np.asarray(case.apply(z))
+    assert np.dot(z - p, x - p) <= 1e-10 * (1 + np.max(np.abs(z))) ** 2
 
 
 COULOMB = nv.CoulombFriction(bound=lambda t, y, a: a)
@@ -306,6 +308,7 @@ def _soc_flat(s, w, mu):
 
 
 _soc_fns = jacobian_fns(_soc_flat, (0, 1, 2))
+_soc_flat_jit = _soc_fns[0]
 
 
 def _away_from_soc_kinks(s, w, mu):
@@ -377,6 +380,7 @@ def test_sign_resolvent_jacobian(z, rho):
 
 _contact2_fns = jacobian_fns(contact2, (0, 1))
 _lcp = jax.jit(nv.lcp_solve)
+_lcp_fns = jacobian_fns(nv.lcp_solve, (0, 1))
 
 
 def _contact2_lcp(z, e):
@@ -490,49 +494,51 @@ def test_bad_construction():
 # The documented element of the generalised Jacobian at kinks.
 
 
-def _both_jacobians(f, *args, argnums=0):
-    # jitted: eager differentiation of the LCP's while loop retraces it op by op
-    return tuple(jax.jit(jac(f, argnums))(*args) for jac in (jax.jacfwd, jax.jacrev))
-
-
 def test_clip_kinks_take_identity():
-    # On the bound the point is in the set: d/dz = 1 (plain jnp.clip would give 1/2), and the
-    # bound itself gets derivative 0.
-    for z in (-1.0, 1.0):
-        for jac in _both_jacobians(nv.clip, z, -1.0, 1.0, argnums=(0, 1, 2)):
-            assert tuple(map(float, jac)) == (1.0, 0.0, 0.0)
-    # A degenerate interval lower == upper: still the identity on the set.
-    for jac in _both_jacobians(nv.clip, 2.0, 2.0, 2.0, argnums=(0, 1, 2)):
-        assert tuple(map(float, jac)) == (1.0, 0.0, 0.0)
-    # Strictly outside: derivative w.r.t. the violated bound only.
-    for jac in _both_jacobians(nv.clip, 3.0, -1.0, 1.0, argnums=(0, 1, 2)):
-        assert tuple(map(float, jac)) == (0.0, 0.0, 1.0)
+    jacobians = _clip_fns[1]
+    # On a bound (and on a degenerate interval lower == upper) the point is in the set:
+    # d/dz = 1 (plain jnp.clip would give 1/2) and the bounds get derivative 0.
+    z, lower, upper = (
+        jnp.array([-1.0, 1.0, 2.0]),
+        jnp.array([-1.0, -1.0, 2.0]),
+        jnp.array([1.0, 1.0, 2.0]),
+    )
+    for dz, dlower, dupper in jacobians(z, lower, upper):
+        np.testing.assert_array_equal(dz, np.eye(3))
+        np.testing.assert_array_equal(dlower, np.zeros((3, 3)))
+        np.testing.assert_array_equal(dupper, np.zeros((3, 3)))
+    # Strictly outside: the derivative is w.r.t. the violated bound only.
+    z, lower, upper = jnp.array([3.0, -3.0, 0.5]), -jnp.ones(3), jnp.ones(3)
+    for dz, dlower, dupper in jacobians(z, lower, upper):
+        np.testing.assert_array_equal(dz, np.diag([0.0, 0.0, 1.0]))
+        np.testing.assert_array_equal(dlower, np.diag([0.0, 1.0, 0.0]))
+        np.testing.assert_array_equal(dupper, np.diag([1.0, 0.0, 0.0]))
 
 
 def test_nonnegative_and_box_kinks_take_identity():
-    z = jnp.array([0.0, 0.0, 2.0])
-    nonneg = lambda v: nv.NonNegative()(v, nv.default_context(v))
-    box = lambda v: _CATALOGUE["box"][0](v, nv.default_context(v))  # z on lower/lower/l=u
-    for f in (nonneg, box):
-        for jac in _both_jacobians(f, z):
+    z = jnp.array([0.0, 0.0, 2.0])  # on the box's lower bounds and its interval [2, 2]
+    for name in ("nonnegative", "box"):
+        proj = _CATALOGUE[name][0]
+        f = lambda v: proj(v, nv.default_context(v))
+        np.testing.assert_array_equal(f(z), z)
+        for jac in (jax.jacfwd(f)(z), jax.jacrev(f)(z)):
             np.testing.assert_array_equal(jac, np.eye(3))
 
 
 def test_ball_kinks():
-    w = jnp.array([3.0, 4.0])
-    # On the boundary |w| = r: identity.
-    for jac in _both_jacobians(nv.project_ball, w, 5.0, argnums=(0, 1)):
-        np.testing.assert_array_equal(jac[0], np.eye(2))
-        np.testing.assert_array_equal(jac[1], np.zeros(2))
-    # At the centre: identity.
-    for jac in _both_jacobians(nv.project_ball, jnp.zeros(2), 1.0):
-        np.testing.assert_array_equal(jac, np.eye(2))
+    jacobians = _ball_fns[1]
+    w = jnp.array([3.0, 4.0, 0.0])
+    # On the boundary |w| = r, and at the centre: identity.
+    for point in (w, jnp.zeros(3)):
+        for dw, dr in jacobians(point, 5.0):
+            np.testing.assert_array_equal(dw, np.eye(3))
+            np.testing.assert_array_equal(dr, np.zeros(3))
     # Radius <= 0: the set is {0}, output 0, zero Jacobian.
     for radius in (0.0, -1.0):
-        np.testing.assert_array_equal(nv.project_ball(w, radius), np.zeros(2))
-        for jac in _both_jacobians(nv.project_ball, w, radius, argnums=(0, 1)):
-            np.testing.assert_array_equal(jac[0], np.zeros((2, 2)))
-            np.testing.assert_array_equal(jac[1], np.zeros(2))
+        np.testing.assert_array_equal(_ball_fns[0](w, radius), np.zeros(3))
+        for dw, dr in jacobians(w, radius):
+            np.testing.assert_array_equal(dw, np.zeros((3, 3)))
+            np.testing.assert_array_equal(dr, np.zeros(3))
 
 
 SOC_KINKS = [
@@ -544,38 +550,39 @@ SOC_KINKS = [
     (-2.0, [0.1, 0.0], 0.5, "zero"),  # strictly in the polar cone
     (-2.5, [3.0, 4.0], 0.5, "zero"),  # on the polar cone's boundary mu |w| = -s
 ]
-_SOC_REV_NAN = pytest.mark.xfail(
-    strict=True,
-    reason="nivpjax bug: reverse mode of project_soc gives NaN in the w-columns at w = 0 "
-    "(the transpose of the unselected boundary piece multiplies 0 by d|w|/dw = 0/0)",
-)
 
 
 @pytest.mark.parametrize(
     "s, w, mu, expected, mode",
-    [(*case, "jacfwd") for case in SOC_KINKS]
-    + [
-        pytest.param(*case, "jacrev", marks=_SOC_REV_NAN if not any(case[1]) else ())
-        for case in SOC_KINKS
-    ],
+    [(*case, "jacfwd") for case in SOC_KINKS] + [(*case, "jacrev") for case in SOC_KINKS],
 )
 def test_soc_kinks(s, w, mu, expected, mode):
     w = jnp.asarray(w)
     out = _soc_flat(s, w, mu)
     z = np.concatenate([[s], w])
     np.testing.assert_array_equal(out, z if expected == "identity" else np.zeros(3))
-    jac = jax.jit(getattr(jax, mode)(_soc_flat, (0, 1, 2)))(s, w, mu)
+    jac = _soc_fns[1](s, w, mu)[0 if mode == "jacfwd" else 1]
     full = np.concatenate([np.asarray(jac[0])[:, None], np.asarray(jac[1])], axis=1)
     np.testing.assert_array_equal(full, np.eye(3) if expected == "identity" else 0.0)
     np.testing.assert_array_equal(jac[2], np.zeros(3))
 
 
+def test_soc_non_expansive_at_zero_friction():
+    # K_0 is the ray {w = 0, s >= 0} (the limit mu -> 0+; a friction cone with mu = 0 is a
+    # frictionless normal force s >= 0). Any projection is non-expansive, in particular
+    # continuous in w at w = 0.
+    a = np.asarray(_soc_flat_jit(-1.0, jnp.array([0.0, 0.0]), 0.0))
+    b = np.asarray(_soc_flat_jit(-1.0, jnp.array([1e-12, 0.0]), 0.0))
+    assert np.linalg.norm(a - b) <= 1e-12
+    np.testing.assert_array_equal(a, np.zeros(3))
+
+
 def test_coulomb_stick_slip_boundary_takes_stick_branch():
     # |z| = rho c exactly: output 0 and dP/dz = 0 (the stick branch, clip's identity).
-    z, rho, c = jnp.array([1.0, -1.0]), jnp.array([0.5, 0.5]), jnp.array([2.0, 2.0])
-    np.testing.assert_array_equal(coulomb(z, rho, c), np.zeros(2))
-    for jac in _both_jacobians(coulomb, z, rho, c):
-        np.testing.assert_array_equal(jac, np.zeros((2, 2)))
+    z, rho, c = jnp.array([1.0, -1.0, 0.3]), jnp.array([0.5, 0.5, 1.0]), jnp.array([2.0, 2.0, 0.3])
+    np.testing.assert_array_equal(_coulomb_fns[0](z, rho, c), np.zeros(3))
+    for dz, _, _ in _coulomb_fns[1](z, rho, c):
+        np.testing.assert_array_equal(dz, np.zeros((3, 3)))
 
 
 def test_sign_resolvent_kink_takes_identity():
@@ -584,7 +591,7 @@ def test_sign_resolvent_kink_takes_identity():
     f = lambda z: sign(z, nv.default_context(z))
     z = jnp.array([0.25, 0.5])
     np.testing.assert_array_equal(f(z), [0.25, 1.0])
-    for jac in _both_jacobians(f, z):
+    for jac in (jax.jacfwd(f)(z), jax.jacrev(f)(z)):
         np.testing.assert_array_equal(jac, [[1.0, 0.0], [2.0, 1.0]])
 
 
@@ -592,39 +599,21 @@ def test_lcp_degenerate_index_is_inactive():
     # q_1 = 0 with p_1 = 0 and (Dp + q)_1 = 0: no impulse reacts (dp_1 = 0).
     D = jnp.array([[2.0, 0.5], [0.5, 1.0]])
     q = jnp.array([-1.0, -0.25])  # p = (0.5, 0), w_1 = 0.5 * 0.5 - 0.25 = 0
-    p = nv.lcp_solve(D, q)
-    np.testing.assert_array_equal(p, [0.5, 0.0])
-    for jac in _both_jacobians(nv.lcp_solve, D, q, argnums=1):
-        np.testing.assert_array_equal(jac, [[-0.5, 0.0], [0.0, 0.0]])
-
-
-def test_contact_grazing_is_identity():
-    # Resting contact (gap 0, u^- = 0) with zero candidate velocity: q = 0, p = 0; the point
-    # is feasible, so the Jacobian is the identity.
-    floor = nv.UnilateralContact(
-        gap=lambda t, y, a: y[0], velocity_map=lambda t, y, a: jnp.array([[0.0, 1.0]])
-    )
-    y_prev = jnp.array([0.0, 0.0])
-    f = lambda z: floor(z, context(z, y_prev=y_prev, h=0.01))
-    z = jnp.array([0.0, 0.0])
-    np.testing.assert_array_equal(f(z), z)
-    for jac in _both_jacobians(f, z):
-        np.testing.assert_array_equal(jac, np.eye(2))
+    np.testing.assert_array_equal(_lcp_fns[0](D, q), [0.5, 0.0])
+    for _, dq in _lcp_fns[1](D, q):
+        np.testing.assert_array_equal(dq, [[-0.5, 0.0], [0.0, 0.0]])
 
 
 # ---------------------------------------------------------------------------------------
 # vmap and jit agree with single eager calls (values and Jacobians).
 
-MAPPED = {
-    **{
-        name: (lambda z, a, p=proj: p(z, nv.default_context(z)), dim)
-        for name, proj, dim in ALL_PROJECTORS
-    },
+MAPPED = {  # (f(z, a), dim); "block" and the *_state cases cover ALL_PROJECTORS' kernels
+    "block": (lambda z, a: _block(z, nv.default_context(z)), 7),
     "box_state": (lambda z, a: BOX_STATE(z, context(z, y_iter=Y_ITER, args=a)), 3),
     "ball_state": (lambda z, a: BALL_STATE(z, context(z, y_iter=Y_ITER, args=a)), 3),
     "soc_state": (lambda z, a: SOC_STATE(z, context(z, y_iter=Y_ITER, args=a)), 2),
-    "coulomb": (lambda z, a: coulomb(z, jnp.full(3, 0.7), a), 3),
-    "sign": (lambda z, a: SIGN2(z, context(z, rho=a)), 5),
+    "coulomb": (lambda z, a: coulomb(z, jnp.full(3, 0.7), jnp.full(3, a)), 3),
+    "sign": (lambda z, a: SIGN2(z, context(z, rho=jnp.full(5, a))), 5),
     "contact3": (lambda z, a: CONTACT3(z, context(z, y_prev=Y_PREV3, h=0.01)), 5),
     "contact2": (lambda z, a: contact2(z, jnp.full(2, a)), 5),
     "custom_with_jacobian": (lambda z, a: CUSTOM_WITH_JAC(z, nv.default_context(z, a)), 3),
@@ -635,17 +624,18 @@ MAPPED = {
 @pytest.mark.parametrize("name", list(MAPPED))
 def test_vmap_and_jit_match_single_calls(name, getkey):
     f, dim = MAPPED[name]
+    with_jac = lambda z, a: (f(z, a), jax.jacfwd(f)(z, a))
     zs = 2.0 * jr.normal(getkey(), (4, dim))
     zs = jnp.concatenate([zs, jnp.zeros((1, dim))])  # a kink for most sets
     args = jr.uniform(getkey(), (5,), minval=0.2, maxval=1.0)
     tol = dict(rtol=1e-13, atol=1e-13)
-    single, single_jac = jax.jit(f), jax.jit(jax.jacfwd(f))
-    values = jnp.stack([single(z, a) for z, a in zip(zs, args)])
-    jacs = jnp.stack([single_jac(z, a) for z, a in zip(zs, args)])
-    # one eager (un-jitted) call against the jitted one
-    assert tree_allclose(f(zs[0], args[0]), values[0], **tol)
-    assert tree_allclose(jax.jit(jax.vmap(f))(zs, args), values, **tol)
-    assert tree_allclose(jax.jit(jax.vmap(jax.jacfwd(f)))(zs, args), jacs, **tol)
+    single = jax.jit(with_jac)
+    singles = [single(z, a) for z, a in zip(zs, args)]
+    # jit against one eager (un-jitted, un-batched) call
+    assert tree_allclose(f(zs[0], args[0]), singles[0][0], **tol)
+    # vmap (values and Jacobians) against the single calls
+    stacked = jax.tree_util.tree_map(lambda *xs: jnp.stack(xs), *singles)
+    assert tree_allclose(jax.jit(jax.vmap(with_jac))(zs, args), stacked, **tol)
 
 
 def test_lcp_vmap_matches_single_calls(getkey):
@@ -706,9 +696,6 @@ def lcp_problems(draw):
     return D, q
 
 
-_lcp_fns = jacobian_fns(nv.lcp_solve, (0, 1))
-
-
 @settings(max_examples=50, deadline=None)
 @given(problem=lcp_problems())
 def test_lcp_complementarity(problem):
@@ -735,19 +722,21 @@ def test_lcp_jacobian(problem):
 GRAVITY, H = 9.81, 0.01
 
 
-def _floor(restitution):
-    # A ball above a floor: state (height, vertical velocity).
+def _floor(restitution, flat=False):
+    # A ball above a floor: state (height, vertical velocity); gap and velocity map of one
+    # contact as a scalar and as a (1, 2) matrix, or (flat) as a vector.
     return nv.UnilateralContact(
         gap=lambda t, y, a: y[0],
-        velocity_map=lambda t, y, a: jnp.array([[0.0, 1.0]]),
+        velocity_map=lambda t, y, a: jnp.array([0.0, 1.0] if flat else [[0.0, 1.0]]),
         restitution=restitution,
     )
 
 
-def test_contact_resting_ball_has_exactly_zero_velocity():
+@pytest.mark.parametrize("flat", [False, True])
+def test_contact_resting_ball_has_exactly_zero_velocity(flat):
     y_prev = jnp.array([0.0, 0.0])
     z = jnp.array([0.0, -GRAVITY * H])  # one gravity-driven step, candidate pushes in
-    out = _floor(0.0)(z, context(z, y_prev=y_prev, h=H))
+    out = _floor(0.0, flat)(z, context(z, y_prev=y_prev, h=H))
     assert float(out[1]) == 0.0
     assert float(out[0]) == 0.0
 
@@ -762,15 +751,27 @@ def test_contact_impact_restitution(e):
     assert float(out[0]) == 0.001
 
 
+_floor_fns = jacobian_fns(lambda z, y_prev: _floor(0.5)(z, context(z, y_prev=y_prev, h=H)), 0)
+
+
 def test_contact_inactive_when_predicted_gap_positive():
     # Positive predicted gap (above the floor, or at it but leaving): the identity, even
     # though the candidate velocity points into the floor.
+    z = jnp.array([0.0, -3.0])
     for y_prev in ([0.5, -1.0], [0.0, 1.0]):
         y_prev = jnp.asarray(y_prev)
-        f = lambda z: _floor(0.5)(z, context(z, y_prev=y_prev, h=H))
-        z = jnp.array([0.0, -3.0])
-        np.testing.assert_array_equal(f(z), z)
-        np.testing.assert_array_equal(jax.jacfwd(f)(z), np.eye(2))
+        np.testing.assert_array_equal(_floor_fns[0](z, y_prev), z)
+        for jac in _floor_fns[1](z, y_prev):
+            np.testing.assert_array_equal(jac, np.eye(2))
+
+
+def test_contact_grazing_is_identity():
+    # Resting contact (gap 0, u^- = 0) and zero candidate velocity: q = 0, p = 0. The point is
+    # feasible, so the Jacobian is the identity.
+    z = y_prev = jnp.array([0.0, 0.0])
+    np.testing.assert_array_equal(_floor_fns[0](z, y_prev), z)
+    for jac in _floor_fns[1](z, y_prev):
+        np.testing.assert_array_equal(jac, np.eye(2))
 
 
 _contact2 = jax.jit(contact2)
@@ -891,8 +892,8 @@ def test_soc_matches_reference(record_property):
     """`MuScaledSOCProjection._proj_mu_scaled_soc(z, mu)` projects z = (s, w) onto
     {s >= 0, |w| <= mu s}: the same set, ordering (s first) and mu as
     `nv.project_soc(z[0], z[1:], mu)`. (The reference's `project()` calls it with
-    mu' = 1/mu on [N, T]; that is `project_soc(N, T, 1/mu)` here.) mu > 0 only: see the
-    report on mu = 0."""
+    mu' = 1/mu on [N, T]; that is `project_soc(N, T, 1/mu)` here.) mu > 0 only: at mu = 0
+    neither is a projection (see test_soc_non_expansive_at_zero_friction)."""
     ref = pytest.importorskip("solve_nivp.projections")
     kernel = ref.MuScaledSOCProjection._proj_mu_scaled_soc
     rng = np.random.default_rng(3)
@@ -908,9 +909,6 @@ def test_soc_matches_reference(record_property):
         worst = max(worst, float(np.max(np.abs(got - kernel(z, mu)))))
     _report(record_property, "soc", worst)
     assert worst <= 1e-12
-
-
-_soc_flat_jit = jax.jit(_soc_flat)
 
 
 def _moreau_reference(ref, Wt, B, e):

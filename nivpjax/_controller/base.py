@@ -20,6 +20,9 @@ class StepInfo(eqx.Module):
     - `error_order`: the power of $h$ in `y_error`.
     - `stats`: nonlinear diagnostics ([`nivpjax.StepStats`][]).
     - `error_mask`: components that enter the error norm (differential rows by default).
+    - `violation`: constraint violation at `y1` of constraints inactive at `y0` (e.g. a
+      contact crossed inside the step), in state units; adaptive controllers count it as
+      error so that such events get located.
     """
 
     t0: Float[Array, ""]
@@ -31,6 +34,7 @@ class StepInfo(eqx.Module):
     error_order: int = eqx.field(static=True)
     stats: StepStats
     error_mask: Bool[Array, " n"]
+    violation: Float[Array, ""]
 
 
 class AbstractController(eqx.Module):

@@ -1,5 +1,6 @@
 """A diffrax-style PID step-size controller with a masked error norm."""
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -19,9 +20,12 @@ class PIDController(AbstractController):
        \beta_1 = p + i + d,\ \beta_2 = -(p + 2d),\ \beta_3 = d, $$
 
     clipped to `[factormin, factormax]` (and to at most 1 after a rejection). A step is
-    accepted when $e_n \le 1$. A failed nonlinear solve is rejected and the step shrinks by
-    `nonlinear_factor`. The factor is never differentiated (`stop_gradient`): differentiating
-    $e^{-1/k}$ through an adaptive loop gives meaningless, enormous gradients.
+    accepted when $e_n \le 1$. A constraint violated at the end of a step without having
+    been enforced in it (`StepInfo.violation`, e.g. a missed contact) enters $e_n$ scaled
+    by $\text{atol} + \text{rtol}\,\|y_0\|_\infty$, which locates impacts. A failed nonlinear
+    solve is rejected and the step shrinks by `nonlinear_factor`. The factor is never
+    differentiated (`stop_gradient`): differentiating $e^{-1/k}$ through an adaptive loop
+    gives meaningless, enormous gradients.
 
     **Arguments:**
 
@@ -34,6 +38,8 @@ class PIDController(AbstractController):
     - `error_mask`: boolean array selecting the components in the norm; `None` uses the
       differential rows of the mass matrix.
     - `nonlinear_factor`: shrink factor after a failed nonlinear solve.
+    - `error_order`: overrides the stepper's error order $k$ in the exponents (`None`: use
+      the stepper's).
     """
 
     rtol: float = 1e-3
@@ -48,6 +54,7 @@ class PIDController(AbstractController):
     h_max: float | None = None
     error_mask: jax.Array | None = None
     nonlinear_factor: float = 0.25
+    error_order: int | None = eqx.field(static=True, default=None)
 
     def __check_init__(self):
         for name in ("rtol", "atol"):
@@ -94,11 +101,14 @@ class PIDController(AbstractController):
     def adapt(self, info: StepInfo, state):
         prev, prev_prev = state
         err = scaled_rms_norm(info.y_error, info.y0, info.y1, self.rtol, self.atol, info.error_mask)
+        # A constraint crossed inside the step counts as error, scaled like the state.
+        scale = self.atol + self.rtol * jnp.max(jnp.abs(info.y0), initial=0.0)
+        err = jnp.maximum(err, info.violation / scale)
         ok = info.stats.nonlinear_result == RESULTS.successful
         finite = jnp.all(jnp.isfinite(info.y1)) & jnp.isfinite(err)
         ok = ok & finite
         accept = ok & (err <= 1)
-        k = info.error_order
+        k = info.error_order if self.error_order is None else self.error_order
         beta1 = (self.pcoeff + self.icoeff + self.dcoeff) / k
         beta2 = -(self.pcoeff + 2 * self.dcoeff) / k
         beta3 = self.dcoeff / k

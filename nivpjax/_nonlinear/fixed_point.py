@@ -1,4 +1,5 @@
-"""The VI fixed-point (projection) method: extragradient with a self-adaptive step."""
+"""The VI fixed-point (projection) method: projection steps with an extragradient
+safeguard and a self-adaptive step."""
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -8,29 +9,34 @@ from .base import AbstractNonlinearSolver, init_history, scaled_error
 
 
 class FixedPointVI(AbstractNonlinearSolver):
-    r"""The projection method for $y = P(y - \rho R(y))$ in extragradient form, with an
-    adaptive step $\alpha$ (Korpelevich's extragradient with Khobotov's step rule):
+    r"""The projection method for $y = P(y - \rho R(y))$ with an adaptive step $\alpha$.
 
-    $$ \bar y = P(y - \alpha\rho R(y)), \qquad y^+ = P(y - \alpha\rho R(\bar y)). $$
+    Each iteration starts from $y$ and its predictor $\bar y = P(y - \alpha\rho R(y))$ and
+    takes one of three moves:
 
-    A trial is accepted when the local Lipschitz ratio
-    $L = \alpha\,|R(\bar y) - R(y)|_{\rho} / |\bar y - y|_{\rho^{-1}} \le \nu$ (norms weighted
-    by $\rho$ and $\rho^{-1}$: the iteration is a projection method in the metric
-    $\operatorname{diag}(\rho)^{-1}$, where the stage residual is monotone); otherwise
-    $\alpha$ shrinks by $0.9\max(\text{shrink}, \nu/L)$ and the trial is repeated. After an
-    accepted trial with $L < \nu/2$, $\alpha$ grows by `grow` up to `alpha_max`. Unlike the
-    plain iteration $y \leftarrow P(y - \alpha\rho R(y))$, which cycles on the saddle-point
-    coupling between a state and its multiplier, the extragradient method converges for every
-    monotone Lipschitz residual (linearly when it is strongly monotone).
+    1. **projection step** $y \leftarrow \bar y$ when it contracts the natural residual,
+       $|P(\bar y - \alpha\rho R(\bar y)) - \bar y| \le \kappa\,|\bar y - y|$ (the plain
+       Uzawa/Picard iteration: fast on strongly monotone stages, e.g. stiff decay);
+    2. otherwise, if the local Lipschitz ratio
+       $L = \alpha|R(\bar y) - R(y)|_{\rho} / |\bar y - y|_{\rho^{-1}} \le \nu$, the
+       **extragradient** step $y \leftarrow P(y - \alpha\rho R(\bar y))$ (Korpelevich), which
+       converges for every monotone Lipschitz stage, including the saddle-point coupling of
+       a state with its multiplier on which plain projection cycles;
+    3. otherwise **reject** and shrink $\alpha$ by $0.9\max(\text{shrink}, \nu/L)$.
 
-    Stopping test: the natural residual $|\bar y - y| / \min(1, \alpha) \ge |G(y)|$, so the
-    iteration never stops early; the reported residual is $|G|$ recomputed at the result.
+    After an accepted move with $L < \nu/2$, $\alpha$ grows by `grow` up to `alpha_max`.
+    Norms are weighted by $\rho$ and $\rho^{-1}$: the iteration is a projection method in
+    the metric $\operatorname{diag}(\rho)^{-1}$, where the stage residual is monotone.
+
+    Stopping test: the natural residual $|\bar y - y| / \min(1, \alpha) \ge |G(y)|$ at $y$;
+    the returned value is that $y$ and the reported residual is $|G(y)|$ recomputed.
 
     **Arguments:**
 
     - `rtol`, `atol`, `max_steps`: as for [`nivpjax.SemismoothNewton`][] (default 500).
     - `alpha0`: initial $\alpha$; `alpha_max`: its cap; `nu`: acceptance threshold on $L$;
-      `grow`, `shrink`: adaptation factors.
+      `kappa`: contraction required of a projection step; `grow`, `shrink`: adaptation
+      factors.
     """
 
     rtol: float = 1e-8
@@ -39,48 +45,61 @@ class FixedPointVI(AbstractNonlinearSolver):
     alpha0: float = 1.0
     alpha_max: float = 1.0
     nu: float = 0.9
+    kappa: float = 0.7
     grow: float = 1.5
     shrink: float = 0.3
 
     def _iterate(self, residual, project, rho, y0, rtol, atol):
-        R0 = residual(y0)
         tiny = jnp.finfo(y0.dtype).tiny
         rho = jnp.broadcast_to(jnp.asarray(rho, y0.dtype), y0.shape)
 
+        def wnorm(v, w):
+            return jnp.sqrt(jnp.sum(w * v**2))
+
+        def predictor(y, R, alpha):
+            y_bar = project(y - alpha * rho * R, y, alpha * rho)
+            return y_bar, residual(y_bar)
+
         def cond(carry):
-            y, R, alpha, k, history, done = carry
+            y, R, y_bar, R_bar, alpha, k, history, done = carry
             return (k < self.max_steps) & ~done & jnp.isfinite(alpha) & (alpha > 1e-14)
 
         def body(carry):
-            y, R, alpha, k, history, _ = carry
-            y_bar = project(y - alpha * rho * R, y, alpha * rho)
-            R_bar = residual(y_bar)
+            y, R, y_bar, R_bar, alpha, k, history, _ = carry
             step = y_bar - y
-            num = alpha * jnp.sqrt(jnp.sum(rho * (R_bar - R) ** 2))
-            den = jnp.sqrt(jnp.sum(step**2 / rho))
-            L = jnp.where(den > tiny, num / jnp.where(den > tiny, den, 1.0), 0.0)
-            finite = jnp.all(jnp.isfinite(y_bar)) & jnp.all(jnp.isfinite(R_bar))
-            accept = finite & (L <= self.nu)
             natural = step / jnp.minimum(1.0, alpha)
-            done = accept & (scaled_error(natural, y, rtol, atol) <= 1)
-            # At convergence keep y itself: its natural residual is the certified one.
-            y_plus = project(y - alpha * rho * R_bar, y_bar, alpha * rho)
-            R_plus = residual(y_plus)
-            move = accept & ~done
-            y_new = jnp.where(move, y_plus, y)
-            R_new = jnp.where(move, R_plus, R)
+            finite = jnp.all(jnp.isfinite(y_bar)) & jnp.all(jnp.isfinite(R_bar))
+            done = finite & (scaled_error(natural, y, rtol, atol) <= 1)
+            den = wnorm(step, 1 / rho)
+            L = alpha * wnorm(R_bar - R, rho) / jnp.where(den > tiny, den, 1.0)
+            L = jnp.where(den > tiny, L, 0.0)
+            # 1. the projection step from y_bar, if it contracts
+            z = project(y_bar - alpha * rho * R_bar, y_bar, alpha * rho)
+            plain = (
+                finite & jnp.all(jnp.isfinite(z)) & (wnorm(z - y_bar, 1 / rho) <= self.kappa * den)
+            )
+            # 2. the extragradient step, if the step size is safe
+            extra = ~plain & finite & (L <= self.nu)
+            y_extra = project(y - alpha * rho * R_bar, y_bar, alpha * rho)
+            accept = plain | extra
+            y_new = jnp.where(done, y, jnp.where(plain, y_bar, jnp.where(extra, y_extra, y)))
             shrink = 0.9 * jnp.maximum(self.shrink, self.nu / jnp.where(L > 0, L, 1.0))
             shrink = jnp.where(finite, shrink, self.shrink)
             grown = jnp.minimum(alpha * self.grow, self.alpha_max)
             alpha_new = jnp.where(
                 accept, jnp.where(L < 0.5 * self.nu, grown, alpha), alpha * shrink
             )
+            alpha_new = jnp.where(done, alpha, alpha_new)
+            R_new = residual(y_new)
+            y_bar_new, R_bar_new = predictor(y_new, R_new, alpha_new)
             k = k + 1
             history = history.at[k].set(jnp.max(jnp.abs(natural), initial=0.0))
-            return y_new, R_new, alpha_new, k, history, done
+            return y_new, R_new, y_bar_new, R_bar_new, alpha_new, k, history, done
 
-        history = init_history(self.max_steps, y0.dtype, jnp.nan)
         alpha = jnp.asarray(self.alpha0, y0.dtype)
-        carry = (y0, R0, alpha, jnp.array(0), history, jnp.array(False))
-        y, _, _, k, history, _ = lax.while_loop(cond, body, carry)
+        R0 = residual(y0)
+        y_bar0, R_bar0 = predictor(y0, R0, alpha)
+        history = init_history(self.max_steps, y0.dtype, jnp.nan)
+        carry = (y0, R0, y_bar0, R_bar0, alpha, jnp.array(0), history, jnp.array(False))
+        y, *_, k, history, _ = lax.while_loop(cond, body, carry)
         return y, (k.astype(y.dtype), history)

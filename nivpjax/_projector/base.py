@@ -6,7 +6,7 @@ from typing import Any
 
 import equinox as eqx
 import jax.numpy as jnp
-from jaxtyping import Array, Float, PyTree
+from jaxtyping import Array, Bool, Float, PyTree
 
 
 class ProjectionContext(eqx.Module):
@@ -63,6 +63,19 @@ class AbstractProjector(eqx.Module):
     @abc.abstractmethod
     def __call__(self, z: Float[Array, " n"], ctx: ProjectionContext) -> Float[Array, " n"]:
         """Project `z` onto the set described by this projector in context `ctx`."""
+
+    def violation(self, ctx: ProjectionContext) -> Float[Array, ""]:
+        """How far the state at the end of a step, `ctx.y_iter`, violates a constraint that
+        was not enforced during the step because it was inactive at its start `ctx.y_prev`
+        (e.g. the penetration of a contact crossed inside the step). Controllers treat it as
+        a local error, which locates such events. Default: 0 (sets enforced throughout)."""
+        return jnp.zeros((), ctx.y_iter.dtype)
+
+    def impulsive(self, ctx: ProjectionContext) -> Bool[Array, ""]:
+        """Whether the stage from `ctx.y_prev` to `ctx.y_iter` contained an impulse (a jump
+        of the state, e.g. an impact). Multistep stages (Bathe's backward difference) must
+        not extrapolate across it. Default: False (bounded reactions only)."""
+        return jnp.zeros((), bool)
 
 
 Bound = Float[Array, "..."] | Callable[[Any, Any, Any], Any]

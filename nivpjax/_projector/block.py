@@ -54,3 +54,15 @@ class BlockProjector(AbstractProjector):
             sub = eqx.tree_at(lambda c: c.rho, ctx, rho)
             out = out.at[idx].set(projector(z[idx], sub))
         return out
+
+    def violation(self, ctx: ProjectionContext):
+        out = jnp.zeros((), ctx.y_iter.dtype)
+        for _, projector in self.blocks:
+            out = jnp.maximum(out, projector.violation(ctx))
+        return out
+
+    def impulsive(self, ctx: ProjectionContext):
+        out = jnp.zeros((), bool)
+        for _, projector in self.blocks:
+            out = out | projector.impulsive(ctx)
+        return out

@@ -37,6 +37,12 @@ class UnilateralContact(AbstractProjector):
     Jacobian: from the LCP's active set (see [`nivpjax.lcp_solve`][]); a contact exactly at
     $W^T z + e u^- = 0$ with zero impulse counts as inactive (identity, the point is
     feasible).
+
+    Events inside a step: a contact inactive at the start of a step that ends penetrated
+    reports its penetration through `violation`, which adaptive controllers treat as local
+    error; the step is then shortened until the impact is located to the tolerance. A stage
+    with an active approaching contact is `impulsive` (Bathe's scheme restarts its second
+    stage as backward Euler after it).
     """
 
     gap: Callable[[Any, Any, Any], Any]
@@ -45,19 +51,37 @@ class UnilateralContact(AbstractProjector):
     restitution: Bound = 0.0
     lookahead: float = 0.5
 
-    def __call__(self, z, ctx: ProjectionContext):
-        z = jnp.asarray(z)
+    def _start(self, ctx: ProjectionContext, dtype):
+        # Everything decided at the start of the stage: contact velocities, impulse map,
+        # and the active set from the predicted gap.
         y0 = ctx.y_prev
-        Wt = jnp.asarray(self.velocity_map(ctx.t, y0, ctx.args), z.dtype)
+        Wt = jnp.asarray(self.velocity_map(ctx.t, y0, ctx.args), dtype)
         if Wt.ndim == 1:
             Wt = Wt[None, :]
         if self.impulse_map is None:
             B = Wt.T
         else:
-            B = jnp.asarray(self.impulse_map(ctx.t, y0, ctx.args), z.dtype).reshape(Wt.T.shape)
-        gap0 = jnp.atleast_1d(jnp.asarray(self.gap(ctx.t, y0, ctx.args), z.dtype))
+            B = jnp.asarray(self.impulse_map(ctx.t, y0, ctx.args), dtype).reshape(Wt.T.shape)
+        gap0 = jnp.atleast_1d(jnp.asarray(self.gap(ctx.t, y0, ctx.args), dtype))
         u_minus = Wt @ y0
         active = gap0 + self.lookahead * ctx.h * u_minus <= 0
+        return Wt, B, u_minus, active
+
+    def violation(self, ctx: ProjectionContext):
+        """Penetration at the end of the step of contacts inactive at its start."""
+        dtype = ctx.y_iter.dtype
+        _, _, _, active = self._start(ctx, dtype)
+        gap1 = jnp.atleast_1d(jnp.asarray(self.gap(ctx.t, ctx.y_iter, ctx.args), dtype))
+        return jnp.max(jnp.where(active, 0.0, jnp.maximum(-gap1, 0.0)), initial=0.0)
+
+    def impulsive(self, ctx: ProjectionContext):
+        """An active contact approaching at the start of the stage is an impact."""
+        _, _, u_minus, active = self._start(ctx, ctx.y_iter.dtype)
+        return jnp.any(active & (u_minus < 0))
+
+    def __call__(self, z, ctx: ProjectionContext):
+        z = jnp.asarray(z)
+        Wt, B, u_minus, active = self._start(ctx, z.dtype)
         e = jnp.broadcast_to(resolve(self.restitution, ctx, z.dtype), u_minus.shape)
         m = u_minus.shape[0]
         D = Wt @ B

@@ -6,17 +6,23 @@ import jax.numpy as jnp
 from .base import AbstractProjector, Bound, ProjectionContext, resolve
 
 
+def _norm(w):
+    # Guarded so that the unselected branches stay finite in reverse mode at w = 0.
+    sq = jnp.sum(w**2)
+    return jnp.where(sq > 0, jnp.sqrt(jnp.where(sq > 0, sq, 1.0)), 0.0)
+
+
 def _regions(s, w, mu):
-    r = jnp.sqrt(jnp.sum(w**2))
-    inside = r <= mu * s
+    r = _norm(w)
+    inside = (r <= mu * s) & (s >= 0)
     polar = (mu * r <= -s) & ~inside
     return r, inside, polar
 
 
 def _boundary_piece(s, w, mu):
-    # The projection onto the boundary ray through w; smooth where r > 0 (guarded for safety:
-    # the piece is never selected at r = 0).
-    r = jnp.sqrt(jnp.sum(w**2))
+    # The projection onto the boundary ray through w; smooth where r > 0 (the piece is never
+    # selected at r = 0).
+    r = _norm(w)
     r_safe = jnp.where(r > 0, r, 1.0)
     alpha = (s + mu * r) / (1.0 + mu**2)
     return alpha, (mu * alpha / r_safe) * w
@@ -25,7 +31,9 @@ def _boundary_piece(s, w, mu):
 @jax.custom_jvp
 def project_soc(s, w, mu):
     r"""Project $(s, w)$, $s$ scalar and $w \in \mathbb{R}^k$, onto
-    $K_\mu = \{(s, w) : |w| \le \mu s\}$, $\mu \ge 0$.
+    $K_\mu = \{(s, w) : |w| \le \mu s,\ s \ge 0\}$, $\mu \ge 0$ (the condition $s \ge 0$
+    only matters at $\mu = 0$, where it makes $K_0 = \{w = 0, s \ge 0\}$ the limit of the
+    cones as $\mu \to 0^+$).
 
     Three regions: inside $K_\mu$ the point is returned; in the polar cone
     $\{\mu |w| \le -s\}$ the result is 0; otherwise it is the projection onto the boundary ray,

@@ -1,6 +1,7 @@
 """The composite Bathe scheme."""
 
 import equinox as eqx
+import jax.numpy as jnp
 
 from .._nonlinear import AbstractNonlinearSolver
 from .._solution import StepStats
@@ -20,6 +21,11 @@ class Bathe(AbstractStepper):
     trapezoidal rule leaves after impacts and switches. Each stage is a VI with the model's
     projector. `gamma` defaults to 1/2. No embedded error estimate (adaptive runs use
     Richardson step doubling).
+
+    If the first stage contains an impulse (an impact: see
+    [`nivpjax.AbstractProjector.impulsive`][]) the backward difference would extrapolate
+    across the velocity jump and inject energy; the second stage then restarts as a backward
+    Euler step from $y_\gamma$ over $(1-\gamma)h$.
     """
 
     gamma: float = 0.5
@@ -45,8 +51,14 @@ class Bathe(AbstractStepper):
         # c1 + c2 + c3 = 0: the stage is a backward Euler step of size h/c3 from an affine
         # combination of the two earlier points.
         y_base = -(c1 * y0 + c2 * y_mid) / c3
+        h_eff = h / c3
+        # After an impulse in the first stage the three points do not lie on one smooth
+        # curve: restart the second stage as backward Euler from y_mid.
+        jump = model.impulsive(t_mid, g * h, y0, y_mid, args)
+        y_base = jnp.where(jump, y_mid, y_base)
+        h_eff = jnp.where(jump, (1 - g) * h, h_eff)
         sol2, multipliers = model.solve_stage(
-            self.solver, t0 + h, h / c3, y_base, None, 1.0, y_mid, y_mid, args
+            self.solver, t0 + h, h_eff, y_base, None, 1.0, y_mid, y_mid, args
         )
         stats = StepStats.combine(stats_of(sol1), stats_of(sol2))
         return StepOutput(y1=sol2.value, y_error=None, multipliers=multipliers, stats=stats)
