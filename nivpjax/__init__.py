@@ -1,5 +1,6 @@
 """nivpjax: JAX-native, differentiable time integration of nonsmooth ODE/DAE systems."""
 
+from . import scenes as scenes
 from ._controller import (
     AbstractController as AbstractController,
     ConstantStepSize as ConstantStepSize,
@@ -33,6 +34,18 @@ from ._projector import (
     project_soc as project_soc,
 )
 from ._results import RESULTS as RESULTS
+from ._scene import (
+    AbstractEffect as AbstractEffect,
+    Contact as Contact,
+    Diode as Diode,
+    Friction as Friction,
+    Relay as Relay,
+    Saturation as Saturation,
+    Scene as Scene,
+    SetValued as SetValued,
+    StateEffect as StateEffect,
+    scene_state as scene_state,
+)
 from ._solution import AttemptLog as AttemptLog, Solution as Solution, StepStats as StepStats
 from ._solve import SolveError as SolveError, solve as solve
 from ._stepper import (

@@ -19,18 +19,20 @@ class Model(eqx.Module):
     - `algebraic`: rows of $A$ that are identically zero (algebraic equations, multipliers,
       switching selections). They are collocated at the end of each stage, scaled by
       `tau / h` in the projection (see below) and left out of the error norm by default.
-    - `tau`: scaling of algebraic rows: $\rho_i = \tau / h$ there and $\rho_i = h$ on
-      differential rows. A multiplier that enters its constraint with weight $h$ (friction,
-      relay and contact multipliers) is then scaled $O(1)$; for an algebraic equation with
-      $O(1)$ sensitivity to its own unknowns, $\tau \approx h$ gives the VI method better
-      steps (Newton does not care).
+    - `tau`: scaling of algebraic rows (scalar or per row): $\rho_i = \tau_i / h$ there and
+      $\rho_i = h$ on differential rows. A multiplier that enters its constraint with weight
+      $h$ (friction, relay and contact multipliers) is then scaled $O(1)$.
+    - `equation_rows`: algebraic rows scaled $\rho_i = \tau_i$ instead (no $1/h$): algebraic
+      equations with $O(1)$ sensitivity to their own unknowns (saturations, diodes with
+      series resistance). Only the VI method's convergence depends on this; Newton does not.
     """
 
     vector_field: Callable[[Any, Any, Any], Any]
     projector: AbstractProjector
     mass_matrix: Float[Array, "n n"] | None
     algebraic: Bool[Array, " n"]
-    tau: float = 1.0
+    tau: Float[Array, " n"] | float = 1.0
+    equation_rows: Bool[Array, " n"] | None = None
 
     def f(self, t, y, args):
         return jnp.asarray(self.vector_field(t, y, args), y.dtype)
@@ -55,7 +57,10 @@ class Model(eqx.Module):
                 diff = diff - (1 - theta) * f_explicit
             return jnp.where(alg, -fy, diff)
 
-        rho = jnp.where(alg, self.tau / h_eff, h_eff).astype(guess.dtype)
+        alg_rho = self.tau / h_eff
+        if self.equation_rows is not None:
+            alg_rho = jnp.where(self.equation_rows, self.tau, alg_rho)
+        rho = jnp.where(alg, alg_rho, h_eff).astype(guess.dtype)
 
         def project(z, y, rho_used):
             ctx = ProjectionContext(

@@ -111,7 +111,8 @@ def solve(
     t_eval=None,
     max_steps: int = 4096,
     error_estimate: Literal["auto", "embedded", "richardson"] = "auto",
-    tau: float = 1.0,
+    tau=1.0,
+    equation_rows=None,
     save_attempts: bool = False,
     adjoint: Literal["checkpointed", "forward"] = "checkpointed",
     progress: bool = False,
@@ -142,7 +143,8 @@ def solve(
     - `max_steps`: bound on attempted steps; buffers have `max_steps + 1` rows.
     - `error_estimate`: `"auto"` uses the stepper's embedded estimate when it has one and
       Richardson step doubling otherwise; `"richardson"` forces step doubling.
-    - `tau`: scaling of algebraic rows (see [`nivpjax.Model`][]).
+    - `tau`, `equation_rows`: scaling of algebraic rows (see [`nivpjax.Model`][]); `tau` is
+      a positive scalar or one value per component, `equation_rows` a boolean mask.
     - `save_attempts`: record every attempted step in `Solution.attempts`.
     - `adjoint`: `"checkpointed"` (default) supports reverse-mode differentiation;
       `"forward"` uses a plain `lax.while_loop` (forward mode only, a little faster).
@@ -186,8 +188,19 @@ def solve(
         )
     if adjoint not in _ADJOINTS:
         raise ValueError(f"`adjoint` must be 'checkpointed' or 'forward', got {adjoint!r}.")
-    if not (isinstance(tau, (int, float)) and tau > 0 and math.isfinite(tau)):
-        raise ValueError(f"`tau` must be a positive float, got {tau!r}.")
+    tau_arr = np.asarray(tau, dtype=float)
+    if tau_arr.shape not in ((), (n,)) or not np.all(np.isfinite(tau_arr) & (tau_arr > 0)):
+        raise ValueError(
+            f"`tau` must be a positive finite scalar or an array of shape ({n},), got {tau!r}."
+        )
+    if equation_rows is not None:
+        equation_rows = np.asarray(equation_rows, bool)
+        if equation_rows.shape != (n,):
+            raise ValueError(
+                f"`equation_rows` must be a boolean array of shape ({n},), got "
+                f"{equation_rows.shape}."
+            )
+        equation_rows = jnp.asarray(equation_rows)
     if h0 is not None:
         h0_c = _concrete_float("h0", h0)
         if h0_c is not None and not h0_c > 0:
@@ -236,7 +249,8 @@ def solve(
         projector=projector,
         mass_matrix=mass,
         algebraic=jnp.asarray(algebraic),
-        tau=float(tau),
+        tau=float(tau_arr) if tau_arr.shape == () else jnp.asarray(tau_arr, dtype),
+        equation_rows=equation_rows,
     )
     traced = _is_traced((y0, t0, t1, args, t_eval, h0))
     sol = _solve_jit(

@@ -1,6 +1,7 @@
 from .ball import Ball as Ball, project_ball as project_ball
 from .base import (
     AbstractProjector as AbstractProjector,
+    Bound as Bound,
     ProjectionContext as ProjectionContext,
     default_context as default_context,
 )

@@ -24,6 +24,8 @@ class ProjectionContext(eqx.Module):
         components the projector acts on). Proximal maps (Coulomb friction without a
         multiplier state) and resolvents need it; true projections ignore it.
     - `args`: the user's parameters.
+    - `block`: inside a [`nivpjax.BlockProjector`][], the indices of the block being
+      projected (`None` outside one); `restrict` maps a full-state vector to the block.
     """
 
     t: Float[Array, ""]
@@ -32,6 +34,11 @@ class ProjectionContext(eqx.Module):
     y_iter: Float[Array, " n"]
     rho: Float[Array, " m"]
     args: PyTree[Any]
+    block: tuple[int, ...] | None = eqx.field(static=True, default=None)
+
+    def restrict(self, v):
+        """The components of a full-state vector `v` that belong to this block."""
+        return v if self.block is None else v[jnp.asarray(self.block)]
 
 
 def default_context(z: Array, args: PyTree[Any] = None) -> ProjectionContext:

@@ -1,6 +1,5 @@
 """Composition of projectors over index blocks of the state."""
 
-import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
@@ -50,19 +49,30 @@ class BlockProjector(AbstractProjector):
         out = z
         for indices, projector in self.blocks:
             idx = np.asarray(indices)
-            rho = jnp.broadcast_to(ctx.rho, z.shape)[idx]
-            sub = eqx.tree_at(lambda c: c.rho, ctx, rho)
-            out = out.at[idx].set(projector(z[idx], sub))
+            out = out.at[idx].set(projector(z[idx], self._sub(ctx, indices, z.shape)))
         return out
+
+    @staticmethod
+    def _sub(ctx: ProjectionContext, indices, shape):
+        rho = jnp.broadcast_to(ctx.rho, shape)[np.asarray(indices)]
+        return ProjectionContext(
+            t=ctx.t,
+            h=ctx.h,
+            y_prev=ctx.y_prev,
+            y_iter=ctx.y_iter,
+            rho=rho,
+            args=ctx.args,
+            block=indices,
+        )
 
     def violation(self, ctx: ProjectionContext):
         out = jnp.zeros((), ctx.y_iter.dtype)
-        for _, projector in self.blocks:
-            out = jnp.maximum(out, projector.violation(ctx))
+        for indices, projector in self.blocks:
+            out = jnp.maximum(out, projector.violation(self._sub(ctx, indices, ctx.y_iter.shape)))
         return out
 
     def impulsive(self, ctx: ProjectionContext):
         out = jnp.zeros((), bool)
-        for _, projector in self.blocks:
-            out = out | projector.impulsive(ctx)
+        for indices, projector in self.blocks:
+            out = out | projector.impulsive(self._sub(ctx, indices, ctx.y_iter.shape))
         return out

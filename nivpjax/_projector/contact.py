@@ -20,6 +20,10 @@ class UnilateralContact(AbstractProjector):
     - `impulse_map(t, y, args) -> (n, m)` (optional): the state change per unit impulse,
       $B(y) = M^{-1} W$ in mechanics. Defaults to $W$ (unit masses).
 
+    The maps always receive the full state; inside a [`nivpjax.BlockProjector`][] the
+    projected vector, and so the columns of `velocity_map` and rows of `impulse_map`, are
+    those of the block (e.g. the velocity components only).
+
     and `restitution` $e$ (scalar or per contact, array or callable).
 
     A contact is active in a stage when its gap predicted from the stage's start,
@@ -63,7 +67,7 @@ class UnilateralContact(AbstractProjector):
         else:
             B = jnp.asarray(self.impulse_map(ctx.t, y0, ctx.args), dtype).reshape(Wt.T.shape)
         gap0 = jnp.atleast_1d(jnp.asarray(self.gap(ctx.t, y0, ctx.args), dtype))
-        u_minus = Wt @ y0
+        u_minus = Wt @ ctx.restrict(y0)
         active = gap0 + self.lookahead * ctx.h * u_minus <= 0
         return Wt, B, u_minus, active
 

@@ -1,7 +1,9 @@
 """Coulomb friction on a velocity component, as a proximal map (no multiplier state)."""
 
+import equinox as eqx
 import jax.numpy as jnp
 
+from .ball import project_ball
 from .base import AbstractProjector, Bound, ProjectionContext, resolve
 from .box import clip
 
@@ -23,15 +25,24 @@ class CoulombFriction(AbstractProjector):
     the wide sense of this library: its fixed points encode the inclusion). No extra state is
     needed: in stick the stage residual $R$ is the friction force (per unit mass).
 
+    With `isotropic=True` the whole (sub)vector is one tangential velocity with isotropic
+    (2-D, disk) friction: $0 \in R + c\,\partial|v|$, whose friction force lies in the disk
+    of radius $c$; the clip becomes [`nivpjax.project_ball`][] (the block's $\rho$ must be
+    uniform, as it is on the differential rows of one stage).
+
     Jacobian: the clip's element (identity on the closed interval), so at the stick/slip
     boundary $|z| = \rho c$ the stick branch ($dP/dz = 0$) is taken; derivatives with respect
-    to $c$ (slip-weakening $\mu(s)$) and $\rho$ come from autodiff.
+    to $c$ (slip-weakening $\mu(s)$) and $\rho$ come from autodiff. Isotropic: the ball's
+    element (identity on the closed disk, i.e. stick).
     """
 
     bound: Bound
+    isotropic: bool = eqx.field(static=True, default=False)
 
     def __call__(self, z, ctx: ProjectionContext):
         z = jnp.asarray(z)
         c = jnp.maximum(resolve(self.bound, ctx, z.dtype), 0.0)
         rho = jnp.broadcast_to(ctx.rho, z.shape)
+        if self.isotropic:
+            return z - rho * project_ball(z / rho, c)
         return z - rho * clip(z / rho, -c, c)

@@ -1,0 +1,78 @@
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._projector import Bound, UnilateralContact
+from .base import AbstractEffect, scene_state
+
+
+class Contact(AbstractEffect):
+    r"""Unilateral contacts with Newton restitution on a mechanical state $x = (\dots q \dots,
+    \dots v \dots)$ with $q' = v$: gaps $g(q) \ge 0$, impact law
+    $0 \le u^+ + e u^- \perp p \ge 0$ with $u = \nabla g^T v$.
+
+    - `gap(t, x, args) -> (m,)`: signed distances.
+    - `positions`, `velocities`: indices of $q$ and $v$ in $x$ (same length).
+    - `restitution`: $e$, scalar, per contact, or callable `(t, y, args)`.
+    - `inverse_mass`: $M^{-1}$ (constant, `(n_dof, n_dof)`), default identity: impulses
+      change velocities by $M^{-1} \nabla g\, p$.
+
+    The contact normals $W^T = \partial g / \partial q$ come from autodiff of `gap`. See
+    [`nivpjax.UnilateralContact`][] for the active set, the LCP and event location.
+    """
+
+    gap: object
+    positions: tuple[int, ...] = eqx.field(static=True)
+    velocities: tuple[int, ...] = eqx.field(static=True)
+    restitution: Bound = 0.0
+    inverse_mass: object = None
+    lookahead: float = 0.5
+    name: str = eqx.field(static=True, default="contact")
+
+    def __init__(
+        self,
+        gap,
+        positions,
+        velocities,
+        restitution=0.0,
+        inverse_mass=None,
+        lookahead=0.5,
+        name="contact",
+    ):
+        self.gap = gap
+        self.positions = tuple(int(i) for i in np.atleast_1d(positions))
+        self.velocities = tuple(int(i) for i in np.atleast_1d(velocities))
+        if len(self.positions) != len(self.velocities):
+            raise ValueError("`positions` and `velocities` must have the same length.")
+        self.restitution = restitution
+        self.inverse_mass = None if inverse_mass is None else jnp.asarray(inverse_mass)
+        self.lookahead = lookahead
+        self.name = name
+
+    def blocks(self, n_states, offset):
+        gap, pos = self.gap, np.asarray(self.positions)
+
+        def gap_full(t, y, args):
+            return jnp.atleast_1d(gap(t, scene_state(y, n_states), args))
+
+        def normals(t, y, args):
+            x = scene_state(y, n_states)
+            return jax.jacfwd(lambda q: jnp.atleast_1d(gap(t, x.at[pos].set(q), args)))(x[pos])
+
+        if self.inverse_mass is None:
+            impulse_map = None
+        else:
+            Minv = self.inverse_mass
+
+            def impulse_map(t, y, args):
+                return Minv @ normals(t, y, args).T
+
+        projector = UnilateralContact(
+            gap=gap_full,
+            velocity_map=normals,
+            impulse_map=impulse_map,
+            restitution=self.restitution,
+            lookahead=self.lookahead,
+        )
+        return [(self.velocities, projector)]

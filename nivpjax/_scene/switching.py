@@ -1,0 +1,123 @@
+"""Multiplier effects: relays (Filippov sliding), saturation, ideal diodes, user sets."""
+
+from collections.abc import Callable
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+
+from .._projector import AbstractProjector, Box, NonNegative
+from .base import AbstractEffect
+
+
+class Relay(AbstractEffect):
+    r"""A relay / sign nonlinearity $w \in \operatorname{sign}(s(t, x))$ as `size`
+    multipliers $w \in [-1, 1]$ (Filippov's convexification: in sliding mode $w$ takes the
+    equivalent-control value). The dynamics read it as `multipliers[name]`.
+
+    - `switch(t, x, args) -> (size,)`: the switching function $s$.
+    """
+
+    name: str = eqx.field(static=True)
+    switch: Callable
+    n: int = eqx.field(static=True, default=1)
+
+    @property
+    def size(self):
+        return self.n
+
+    def blocks(self, n_states, offset):
+        return [(np.arange(offset, offset + self.n), Box(-1.0, 1.0))]
+
+    def constraint(self, t, x, lam, args):
+        return self.switch(t, x, args)
+
+
+class Saturation(AbstractEffect):
+    r"""A saturated signal $\sigma = \operatorname{clip}(u(t, x), \ell, h)$ as multipliers,
+    through the VI $\sigma \in [\ell, h]$, $\langle \sigma - u, \eta - \sigma\rangle \ge 0$.
+    Its rows are algebraic equations ($O(1)$ sensitivity): scaled $\rho = \tau$."""
+
+    name: str = eqx.field(static=True)
+    signal: Callable
+    lower: object = -1.0
+    upper: object = 1.0
+    n: int = eqx.field(static=True, default=1)
+
+    @property
+    def size(self):
+        return self.n
+
+    @property
+    def equation(self):
+        return True
+
+    def blocks(self, n_states, offset):
+        return [(np.arange(offset, offset + self.n), Box(self.lower, self.upper))]
+
+    def constraint(self, t, x, lam, args):
+        return jnp.asarray(self.signal(t, x, args)) - lam
+
+
+class Diode(AbstractEffect):
+    r"""Ideal diodes: currents $i \ge 0$, $v_D(t, x, i) \le 0$, $i\,v_D = 0$
+    (complementarity), with `voltage(t, x, i, args)` the voltage across each diode (anode
+    minus cathode) as the circuit determines it (it may depend on the diode currents through
+    series resistors). Rows scaled as algebraic equations, $\rho = \tau$."""
+
+    name: str = eqx.field(static=True)
+    voltage: Callable
+    n: int = eqx.field(static=True, default=1)
+
+    @property
+    def size(self):
+        return self.n
+
+    @property
+    def equation(self):
+        return True
+
+    def blocks(self, n_states, offset):
+        return [(np.arange(offset, offset + self.n), NonNegative())]
+
+    def constraint(self, t, x, lam, args):
+        return self.voltage(t, x, lam, args)
+
+
+class SetValued(AbstractEffect):
+    r"""A user-defined multiplier effect: `size` multipliers $\lambda \in K$ for any
+    projector $K$, with algebraic rows `constraint(t, x, lam, args)` (the stage solves
+    $\lambda = P_K(\lambda + \rho\,\text{constraint})$). `equation=True` scales the rows as
+    algebraic equations."""
+
+    name: str = eqx.field(static=True)
+    projector: AbstractProjector
+    constraint_fn: Callable
+    n: int = eqx.field(static=True, default=1)
+    is_equation: bool = eqx.field(static=True, default=False)
+
+    @property
+    def size(self):
+        return self.n
+
+    @property
+    def equation(self):
+        return self.is_equation
+
+    def blocks(self, n_states, offset):
+        return [(np.arange(offset, offset + self.n), self.projector)]
+
+    def constraint(self, t, x, lam, args):
+        return self.constraint_fn(t, x, lam, args)
+
+
+class StateEffect(AbstractEffect):
+    """A user-defined effect acting directly on state components `indices` of $x$ with any
+    projector (no multipliers)."""
+
+    name: str = eqx.field(static=True)
+    indices: tuple[int, ...] = eqx.field(static=True)
+    projector: AbstractProjector
+
+    def blocks(self, n_states, offset):
+        return [(self.indices, self.projector)]
