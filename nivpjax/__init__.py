@@ -21,6 +21,7 @@ from ._projector import (
     Box as Box,
     CoulombFriction as CoulombFriction,
     CustomProjector as CustomProjector,
+    EventLocated as EventLocated,
     Identity as Identity,
     NonNegative as NonNegative,
     ProjectionContext as ProjectionContext,

@@ -16,6 +16,7 @@ class _LoopState(eqx.Module):
     # Evolving state.
     t: jax.Array
     h: jax.Array
+    h_last: jax.Array
     y: jax.Array
     controller_state: object
     # Counters.
@@ -37,6 +38,9 @@ class _LoopState(eqx.Module):
 
 
 def _buffers(state: _LoopState):
+    # Only the differentiable float arrays. Per-step counts and flags stay ordinary loop
+    # state: as checkpointed-loop buffers they break its perturbation analysis under
+    # reverse mode ("`where` must not depend on the leaves").
     return [state.ts, state.ys, state.hs, state.multipliers, state.residual_norms]
 
 
@@ -49,24 +53,37 @@ def _init_attempts(max_steps, dtype):
     return AttemptLog(
         t=jnp.full((max_steps,), jnp.inf, dtype),
         h=jnp.zeros((max_steps,), dtype),
-        accepted=jnp.zeros((max_steps,), bool),
+        accepted=jnp.zeros((max_steps,), dtype),
         error_norm=jnp.zeros((max_steps,), dtype),
-        iterations=jnp.zeros((max_steps,), jnp.int32),
-        nonlinear_success=jnp.zeros((max_steps,), bool),
+        iterations=jnp.zeros((max_steps,), dtype),
+        nonlinear_success=jnp.zeros((max_steps,), dtype),
     )
 
 
 def _log_attempt(log: AttemptLog, i, t, h, accepted, err, stats):
     def put(buf, x):
-        return eqxi.buffer_at_set(buf, i, x)
+        return eqxi.buffer_at_set(buf, i, jnp.asarray(x).astype(buf.dtype))
 
     return AttemptLog(
         t=put(log.t, t),
         h=put(log.h, h),
         accepted=put(log.accepted, accepted),
         error_norm=put(log.error_norm, err),
-        iterations=put(log.iterations, stats.iterations.astype(jnp.int32)),
+        iterations=put(log.iterations, stats.iterations),
         nonlinear_success=put(log.nonlinear_success, stats.nonlinear_result == RESULTS.successful),
+    )
+
+
+def _finish_attempts(log: AttemptLog | None) -> AttemptLog | None:
+    if log is None:
+        return None
+    return AttemptLog(
+        t=log.t,
+        h=log.h,
+        accepted=log.accepted > 0,
+        error_norm=log.error_norm,
+        iterations=log.iterations.astype(jnp.int32),
+        nonlinear_success=log.nonlinear_success > 0,
     )
 
 
@@ -93,25 +110,34 @@ def run(
     h_min, h_max = controller.bounds
     h_min = default_h_min(t0, t1, dtype) if h_min is None else jnp.asarray(h_min, dtype)
     h = jnp.maximum(h, h_min)
+    result0 = RESULTS.successful
+    if model.has_algebraic:
+        init = model.consistent_initial_state(stepper.solver, t0, h, y0, args)
+        ok = init.result == RESULTS.successful
+        y0 = jnp.where(ok, init.value, y0)
+        result0 = RESULTS.where(ok, result0, RESULTS.nonlinear_failure)
 
     rows = max_steps + 1
     state = _LoopState(
         t=t0,
         h=h,
+        h_last=jnp.zeros((), dtype),
         y=y0,
         controller_state=controller_state,
         n_accepted=jnp.array(0, jnp.int32),
         n_rejected=jnp.array(0, jnp.int32),
         n_attempts=jnp.array(0, jnp.int32),
         n_iterations=jnp.array(0, jnp.int32),
-        result=RESULTS.successful,
+        result=result0,
         ts=jnp.full((rows,), jnp.inf, dtype).at[0].set(t0),
         ys=jnp.zeros((rows, n), dtype).at[0].set(y0),
         hs=jnp.zeros((rows,), dtype).at[0].set(h),
-        multipliers=jnp.zeros((rows, n), dtype),
-        iterations=jnp.zeros((rows,), jnp.int32),
-        residual_norms=jnp.zeros((rows,), dtype),
-        nonlinear_success=jnp.ones((rows,), bool),
+        # Each buffer must be a distinct array object (equinox locates buffers by identity;
+        # two identical `jnp.zeros` may be one cached constant).
+        multipliers=jnp.zeros((rows, n), dtype).at[0].set(0.0),
+        iterations=jnp.zeros((rows,), dtype).at[0].set(0.0),
+        residual_norms=jnp.zeros((rows,), dtype).at[0].set(-0.0),
+        nonlinear_success=jnp.ones((rows,), dtype).at[0].set(1.0),
         attempts=_init_attempts(max_steps, dtype) if save_attempts else None,
     )
 
@@ -145,7 +171,8 @@ def run(
         )
         accept, h_next, controller_state = controller.adapt(info, s.controller_state)
         accept = accept & jnp.all(jnp.isfinite(out.y1))
-        at_floor = h_try <= h_min * (1 + 1e-6)
+        # Judge the floor by the proposed step: the last step may be stretched onto t1.
+        at_floor = jnp.minimum(h_try, s.h) <= h_min * (1 + 1e-6)
         floor_failure = ~accept & at_floor
         nonlinear_ok = out.stats.nonlinear_result == RESULTS.successful
         failure_code = RESULTS.where(nonlinear_ok, RESULTS.h_min_reached, RESULTS.nonlinear_failure)
@@ -171,6 +198,7 @@ def run(
         return _LoopState(
             t=t_new,
             h=h_next,
+            h_last=h_try,
             y=y_new,
             controller_state=controller_state,
             n_accepted=s.n_accepted + accept.astype(jnp.int32),
@@ -182,9 +210,9 @@ def run(
             ys=put(s.ys, y_new),
             hs=put(s.hs, h_try),
             multipliers=put(s.multipliers, out.multipliers),
-            iterations=put(s.iterations, out.stats.iterations.astype(jnp.int32)),
+            iterations=put(s.iterations, out.stats.iterations.astype(dtype)),
             residual_norms=put(s.residual_norms, out.stats.residual_norm),
-            nonlinear_success=put(s.nonlinear_success, nonlinear_ok),
+            nonlinear_success=put(s.nonlinear_success, nonlinear_ok.astype(dtype)),
             attempts=attempts,
         )
 
@@ -205,16 +233,17 @@ def run(
         ys=ys,
         hs=jnp.where(pad, 0.0, final.hs),
         multipliers=multipliers,
-        iterations=jnp.where(pad, 0, final.iterations),
+        iterations=jnp.where(pad, 0, final.iterations).astype(jnp.int32),
         residual_norms=jnp.where(pad, 0.0, final.residual_norms),
-        nonlinear_success=jnp.where(pad, True, final.nonlinear_success),
+        nonlinear_success=jnp.where(pad, True, final.nonlinear_success > 0),
         t_final=final.t,
+        h_last=final.h_last,
         y_final=final.y,
         n_accepted=k,
         n_rejected=final.n_rejected,
         n_iterations=final.n_iterations,
         result=result,
-        attempts=final.attempts,
+        attempts=_finish_attempts(final.attempts),
     )
 
 

@@ -33,6 +33,7 @@ class Model(eqx.Module):
     algebraic: Bool[Array, " n"]
     tau: Float[Array, " n"] | float = 1.0
     equation_rows: Bool[Array, " n"] | None = None
+    has_algebraic: bool = eqx.field(static=True, default=False)
 
     def f(self, t, y, args):
         return jnp.asarray(self.vector_field(t, y, args), y.dtype)
@@ -70,6 +71,13 @@ class Model(eqx.Module):
 
         sol = solver.solve(residual, project, rho, guess)
         return sol, residual(sol.value)
+
+    def consistent_initial_state(self, solver, t0, h, y0, args):
+        r"""Solve the algebraic rows and the projection at $t_0$ with the differential
+        states held fixed (a stage with $\theta = 0$): multipliers get their consistent
+        values (a relay selection, a diode current) before the first step uses them, and an
+        initial state outside the admissible set is projected onto it."""
+        return self.solve_stage(solver, t0, h, y0, None, 0.0, y0, y0, args)[0]
 
     def _context(self, t, h, y0, y1, args):
         rho = jnp.full_like(y1, h)

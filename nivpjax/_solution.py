@@ -58,6 +58,7 @@ class Solution(eqx.Module):
       multiplier's row; zero (to solver tolerance) on free components.
     - `iterations`, `residual_norms`, `nonlinear_success`: per accepted step.
     - `t_final`, `y_final`: where the run ended (`t1` unless it failed).
+    - `h_last`: the size of the last attempted step (the failing one if the run failed).
     - `n_accepted`, `n_rejected`, `n_iterations`: counts (iterations include rejected steps).
     - `result`: a [`nivpjax.RESULTS`][] code.
     - `t_eval`, `y_eval`: the solution at the requested output times (piecewise-linear
@@ -73,6 +74,7 @@ class Solution(eqx.Module):
     residual_norms: Float[Array, " N"]
     nonlinear_success: Bool[Array, " N"]
     t_final: Float[Array, ""]
+    h_last: Float[Array, ""]
     y_final: Float[Array, " n"]
     n_accepted: Int[Array, ""]
     n_rejected: Int[Array, ""]
@@ -96,6 +98,7 @@ class Solution(eqx.Module):
             residual_norms=cut(self.residual_norms),
             nonlinear_success=cut(self.nonlinear_success),
             t_final=self.t_final,
+            h_last=self.h_last,
             y_final=self.y_final,
             n_accepted=self.n_accepted,
             n_rejected=self.n_rejected,

@@ -68,7 +68,12 @@ def _check_mass_matrix(mass_matrix, n, dtype):
             "`mass_matrix` must be a concrete array (its zero rows decide which rows are "
             "algebraic at trace time); pass it outside `jit`/`vmap` or close over it."
         )
-    A = np.asarray(mass_matrix, dtype=float)
+    try:
+        A = np.asarray(mass_matrix, dtype=float)
+    except (TypeError, ValueError):
+        raise TypeError(
+            f"`mass_matrix` must be a numeric (n, n) array, got {mass_matrix!r}."
+        ) from None
     if A.shape != (n, n):
         raise ValueError(
             f"`mass_matrix` must have shape (n, n) = ({n}, {n}) to match `y0`, got {A.shape}."
@@ -84,7 +89,15 @@ def _check_mass_matrix(mass_matrix, n, dtype):
 def _check_vector_field(vector_field, t0, y0, args):
     if not callable(vector_field):
         raise TypeError(f"`vector_field` must be callable f(t, y, args), got {vector_field!r}.")
-    out = jax.eval_shape(vector_field, t0, y0, args)
+    try:
+        out = jax.eval_shape(vector_field, t0, y0, args)
+    except TypeError as err:
+        if "positional argument" not in str(err):
+            raise
+        raise TypeError(
+            f"`vector_field` must accept (t, y, args) (diffrax's convention); calling it "
+            f"failed with: {err}"
+        ) from None
     shape = getattr(out, "shape", None)
     if shape != y0.shape:
         raise ValueError(
@@ -129,7 +142,9 @@ def solve(
 
     - `vector_field`: $f(t, y, \text{args})$ returning an array shaped like `y0`.
     - `t0`, `t1`: the interval, `t1 > t0`.
-    - `y0`: the initial state, a 1-D floating array (float32 or float64).
+    - `y0`: the initial state, a 1-D floating array (float32 or float64). With algebraic
+      rows, the multipliers in `y0` are only initial guesses: consistent values are solved
+      for at `t0` (differential states held fixed) before the first step.
     - `args`: any pytree of parameters, passed to $f$ and to callable bounds of projectors.
     - `projector`: an [`nivpjax.AbstractProjector`][]; default [`nivpjax.Identity`][].
     - `mass_matrix`: the constant descriptor matrix $A$ (concrete, shape `(n, n)`); zero
@@ -165,12 +180,18 @@ def solve(
     t1_c = _concrete_float("t1", t1)
     if t0_c is not None and t1_c is not None and not t1_c > t0_c:
         raise ValueError(f"`t1` must be greater than `t0`, got t0={t0_c}, t1={t1_c}.")
-    if not isinstance(max_steps, int) or isinstance(max_steps, bool) or max_steps < 1:
+    if (
+        not isinstance(max_steps, (int, np.integer))
+        or isinstance(max_steps, (bool, np.bool_))
+        or max_steps < 1
+    ):
         raise ValueError(f"`max_steps` must be a positive int, got {max_steps!r}.")
+    max_steps = int(max_steps)
     if projector is None:
         projector = Identity()
     if not isinstance(projector, AbstractProjector):
         raise TypeError(f"`projector` must be an AbstractProjector, got {projector!r}.")
+    projector.validate(n)
     if stepper is None:
         stepper = Bathe()
     if not isinstance(stepper, AbstractStepper):
@@ -188,6 +209,8 @@ def solve(
         )
     if adjoint not in _ADJOINTS:
         raise ValueError(f"`adjoint` must be 'checkpointed' or 'forward', got {adjoint!r}.")
+    if isinstance(tau, (str, bytes)) or not np.issubdtype(np.asarray(tau).dtype, np.number):
+        raise TypeError(f"`tau` must be a positive number or array, got {tau!r}.")
     tau_arr = np.asarray(tau, dtype=float)
     if tau_arr.shape not in ((), (n,)) or not np.all(np.isfinite(tau_arr) & (tau_arr > 0)):
         raise ValueError(
@@ -206,10 +229,12 @@ def solve(
         if h0_c is not None and not h0_c > 0:
             raise ValueError(f"`h0` must be positive, got {h0_c}.")
     h_min, h_max = controller.bounds
-    if h_min is not None and h_min < 0:
-        raise ValueError(f"`h_min` must be non-negative, got {h_min}.")
-    if h_max is not None and not h_max > 0:
-        raise ValueError(f"`h_max` must be positive, got {h_max}.")
+    if h_min is not None and not (math.isfinite(h_min) and h_min >= 0):
+        raise ValueError(f"`h_min` must be finite and non-negative, got {h_min}.")
+    if h_max is not None and not (math.isfinite(h_max) and h_max > 0):
+        raise ValueError(f"`h_max` must be finite and positive, got {h_max}.")
+    if h0 is None and controller.requires_h0:
+        raise ValueError(f"{type(controller).__name__} needs an initial step `h0`.")
     if h_min is not None and h_max is not None and h_min > h_max:
         raise ValueError(f"`h_min` must not exceed `h_max`, got {h_min} > {h_max}.")
 
@@ -241,8 +266,15 @@ def solve(
             raise ValueError(f"`t_eval` must be 1-D, got shape {t_eval.shape}.")
         if not _is_traced(t_eval) and t0_c is not None and t1_c is not None:
             te = np.asarray(t_eval)
-            if np.any(np.diff(te) < 0) or te.min() < t0_c or te.max() > t1_c:
-                raise ValueError("`t_eval` must be sorted and lie within [t0, t1].")
+            if not np.all(np.isfinite(te)):
+                raise ValueError("`t_eval` contains NaN or inf.")
+            if np.any(np.diff(te) < 0):
+                raise ValueError("`t_eval` must be sorted in increasing order.")
+            if te.min() < t0_c or te.max() > t1_c:
+                raise ValueError(
+                    f"`t_eval` must lie within [t0, t1] = [{t0_c}, {t1_c}], got values in "
+                    f"[{te.min()}, {te.max()}]."
+                )
 
     model = Model(
         vector_field=vector_field,
@@ -251,6 +283,7 @@ def solve(
         algebraic=jnp.asarray(algebraic),
         tau=float(tau_arr) if tau_arr.shape == () else jnp.asarray(tau_arr, dtype),
         equation_rows=equation_rows,
+        has_algebraic=bool(algebraic.any()),
     )
     traced = _is_traced((y0, t0, t1, args, t_eval, h0))
     sol = _solve_jit(
@@ -337,10 +370,10 @@ def _raise_if_failed(sol: Solution):
     if result == RESULTS.successful:
         return
     k = int(sol.n_accepted)
-    t = float(sol.ts[k])
-    h = float(sol.hs[k]) if k > 0 else float("nan")
+    t = float(sol.t_final)
+    h = float(sol.h_last)
     message = RESULTS[result]
     raise SolveError(
         f"nivpjax.solve failed at t = {t:.10g} after {k} accepted and "
-        f"{int(sol.n_rejected)} rejected steps (last accepted step size {h:.3g}): {message}"
+        f"{int(sol.n_rejected)} rejected steps (last attempted step size {h:.3g}): {message}"
     )

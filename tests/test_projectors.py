@@ -929,9 +929,11 @@ def test_contact_matches_reference(case, record_property):
     G(lam) = B lam, solves 0 <= lam perp W^T (ybar + B lam) + e W^T y_prev >= 0 on its active
     set {min(gap(ybar), gap(y_k)) <= 0} and returns ybar + B lam: the same LCP as
     `UnilateralContact` on its active set {gap(y_prev) + h/2 u^- <= 0}. All positions are
-    set to -0.01 (penetrating) and samples with u^- > 2 skipped, so that both active sets
-    are all contacts. The reference's projected-Jacobi LCP is run to 1e-14 (it converges:
-    D is diagonally dominant)."""
+    set to -0.01 (penetrating) so that both active sets are all contacts, and only
+    approaching pre-impact velocities u^- <= 0 are sampled: nivpjax applies restitution to
+    approach velocities only (e min(u^-, 0)), the reference to any u^-, which lets a
+    separating penetrated contact pull inwards. The reference's projected-Jacobi LCP is run
+    to 1e-14 (it converges: D is diagonally dominant)."""
     ref = pytest.importorskip("solve_nivp.projections")
     if case == "single":
         # state (height, horizontal velocity, vertical velocity), unit impulse map
@@ -954,11 +956,11 @@ def test_contact_matches_reference(case, record_property):
     rng = np.random.default_rng(4)
     n = Wt.shape[1]
     worst, used = 0.0, 0
-    for _ in range(60):
+    for _ in range(120):
         y_prev, y_k, ybar = (rng.normal(scale=1.5, size=n) for _ in range(3))
         for y in (y_prev, y_k, ybar):
             y[:m] = -0.01
-        if np.any(Wt @ y_prev > 2.0):
+        if np.any(Wt @ y_prev > 0.0):
             continue
         used += 1
         e = rng.uniform(0.0, 1.0, m)
@@ -968,6 +970,6 @@ def test_contact_matches_reference(case, record_property):
         expected = _moreau_reference(ref, Wt, B, e_ref).project(y_k, ybar, prev_state=y_prev)
         got = np.asarray(apply(ybar, y_k, y_prev, e))
         worst = max(worst, float(np.max(np.abs(got - expected))))
-    assert used >= 40
+    assert used >= 10
     _report(record_property, f"contact_{case}", worst)
     assert worst <= 1e-8

@@ -56,6 +56,11 @@ class AbstractController(eqx.Module):
     def needs_error_estimate(self) -> bool: ...
 
     @property
+    def requires_h0(self) -> bool:
+        """Whether `solve` must be given `h0` (no step-size estimate of its own)."""
+        return False
+
+    @property
     @abc.abstractmethod
     def bounds(self) -> tuple[Any, Any]:
         """`(h_min, h_max)`, each a float or `None`."""

@@ -18,6 +18,10 @@ class ConstantStepSize(AbstractController):
         return False
 
     @property
+    def requires_h0(self) -> bool:
+        return True
+
+    @property
     def bounds(self):
         return self.h_min, None
 

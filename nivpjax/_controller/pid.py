@@ -19,7 +19,8 @@ class PIDController(AbstractController):
     $$ \text{safety}\cdot e_n^{-\beta_1/k} e_{n-1}^{-\beta_2/k} e_{n-2}^{-\beta_3/k},\quad
        \beta_1 = p + i + d,\ \beta_2 = -(p + 2d),\ \beta_3 = d, $$
 
-    clipped to `[factormin, factormax]` (and to at most 1 after a rejection). A step is
+    clipped to `[factormin, factormax]` (and to at most 1 on a rejection and on the step
+    after one). A step is
     accepted when $e_n \le 1$. A constraint violated at the end of a step without having
     been enforced in it (`StepInfo.violation`, e.g. a missed contact) enters $e_n$ scaled
     by $\text{atol} + \text{rtol}\,\|y_0\|_\infty$, which locates impacts. A failed nonlinear
@@ -57,18 +58,34 @@ class PIDController(AbstractController):
     error_order: int | None = eqx.field(static=True, default=None)
 
     def __check_init__(self):
-        for name in ("rtol", "atol"):
+        for name in ("rtol", "atol", "safety"):
             value = getattr(self, name)
             if isinstance(value, jax.core.Tracer):
                 continue  # batched or differentiated tolerances: checked by the caller
+            if isinstance(value, (str, bytes)) or not np.issubdtype(
+                np.asarray(value).dtype, np.number
+            ):
+                raise TypeError(f"`{name}` must be a real number, got {value!r}.")
             if not (np.isfinite(value) and value > 0):
                 raise ValueError(f"`{name}` must be positive and finite, got {value}.")
+        for name in ("h_min", "h_max"):
+            value = getattr(self, name)
+            if value is not None and not np.isfinite(value):
+                raise ValueError(f"`{name}` must be finite, got {value}.")
         if self.h_min is not None and self.h_max is not None and self.h_min > self.h_max:
             raise ValueError(
                 f"`h_min` must not exceed `h_max`, got h_min={self.h_min}, h_max={self.h_max}."
             )
-        if not 0 < self.factormin <= 1 <= self.factormax:
-            raise ValueError("need 0 < factormin <= 1 <= factormax.")
+        if not 0 < self.factormin <= 1:
+            raise ValueError(f"`factormin` must satisfy 0 < factormin <= 1, got {self.factormin}.")
+        if not self.factormax >= 1:
+            raise ValueError(f"`factormax` must be >= 1, got {self.factormax}.")
+        if not 0 < self.nonlinear_factor < 1:
+            raise ValueError(f"`nonlinear_factor` must lie in (0, 1), got {self.nonlinear_factor}.")
+        if self.error_order is not None and not (
+            isinstance(self.error_order, int) and self.error_order >= 1
+        ):
+            raise ValueError(f"`error_order` must be an int >= 1, got {self.error_order!r}.")
 
     @property
     def needs_error_estimate(self) -> bool:
@@ -96,10 +113,10 @@ class PIDController(AbstractController):
             h = jnp.minimum(h, self.h_max)
         if self.h_min is not None:
             h = jnp.maximum(h, self.h_min)
-        return h, (one, one)
+        return h, (one, one, jnp.zeros((), bool))
 
     def adapt(self, info: StepInfo, state):
-        prev, prev_prev = state
+        prev, prev_prev, rejected_before = state
         err = scaled_rms_norm(info.y_error, info.y0, info.y1, self.rtol, self.atol, info.error_mask)
         # A constraint crossed inside the step counts as error, scaled like the state.
         scale = self.atol + self.rtol * jnp.max(jnp.abs(info.y0), initial=0.0)
@@ -115,11 +132,13 @@ class PIDController(AbstractController):
         inv = 1.0 / jnp.maximum(jnp.where(ok, err, 1.0), 1e-10)
         factor = self.safety * inv**beta1 * prev**beta2 * prev_prev**beta3
         factor = jnp.clip(factor, self.factormin, self.factormax)
-        factor = jnp.where(accept, factor, jnp.minimum(factor, 1.0))
+        # No growth on a rejection, nor on the step right after one (Hairer & Wanner): it
+        # stops grow/reject cascades, e.g. while approaching an impact.
+        factor = jnp.where(accept & ~rejected_before, factor, jnp.minimum(factor, 1.0))
         factor = jnp.where(ok, factor, self.nonlinear_factor)
         factor = jax.lax.stop_gradient(factor)
         h_next = info.h * factor
         if self.h_max is not None:
             h_next = jnp.minimum(h_next, self.h_max)
-        new_state = (jnp.where(accept, inv, prev), jnp.where(accept, prev, prev_prev))
+        new_state = (jnp.where(accept, inv, prev), jnp.where(accept, prev, prev_prev), ~accept)
         return accept, h_next, jax.lax.stop_gradient(new_state)

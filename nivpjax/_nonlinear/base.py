@@ -1,6 +1,7 @@
 """Interface of the nonlinear solvers for one implicit stage."""
 
 import abc
+import math
 from collections.abc import Callable
 
 import equinox as eqx
@@ -22,7 +23,9 @@ class NonlinearSolution(eqx.Module):
 
     **Fields:**
 
-    - `value`: the solution $y$ (differentiable through the implicit function theorem).
+    - `value`: the solution: the final iterate $y$, with the components the projector
+      moves replaced by those of $P(y - \\rho R(y))$, so constrained components lie exactly
+      in their sets (differentiable through the implicit function theorem).
     - `iterations`: number of outer iterations taken.
     - `residual_norm`: $\\|G(y)\\|_\\infty$ at the returned value, with
       $G(y) = y - P(y - \\rho R(y))$ at the problem's own $\\rho$.
@@ -90,6 +93,20 @@ class AbstractNonlinearSolver(eqx.Module):
     atol: eqx.AbstractVar[float]
     max_steps: eqx.AbstractVar[int]
 
+    def __check_init__(self):
+        if (
+            not isinstance(self.max_steps, int)
+            or isinstance(self.max_steps, bool)
+            or (self.max_steps < 1)
+        ):
+            raise ValueError(f"`max_steps` must be a positive int, got {self.max_steps!r}.")
+        for name in ("rtol", "atol"):
+            value = getattr(self, name)
+            if isinstance(value, jax.core.Tracer):
+                continue
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
+                raise ValueError(f"`{name}` must be finite and non-negative, got {value!r}.")
+
     @abc.abstractmethod
     def _iterate(self, residual: Residual, project: Project, rho, y0, rtol, atol):
         """Return `(y, (iterations, history))` with float diagnostics."""
@@ -116,8 +133,16 @@ class AbstractNonlinearSolver(eqx.Module):
             return self._iterate(residual, project, rho, guess, rtol, atol)
 
         y, (iterations, history) = lax.custom_root(G, y0, _solve, _tangent_solve, has_aux=True)
+        # On components the projector moves, return the projected point P(y - rho R(y)):
+        # it lies exactly in the set (the iterate only to tolerance), within |G(y)| of y,
+        # with the same implicit derivative (G vanishes along the solution). Free
+        # components keep the iterate, which satisfies its own equations more exactly.
+        z = y - rho * residual(y)
+        p = project(z, y, rho)
+        G_y = y - p
+        value = jnp.where(lax.stop_gradient(p != z), p, y)
         y_nd = lax.stop_gradient(y)
-        G_final = G(y_nd)
+        G_final = lax.stop_gradient(G_y)
         norm = jnp.max(jnp.abs(G_final), initial=0.0)
         converged = scaled_error(G_final, y_nd, rtol, atol) <= 1
         finite = jnp.all(jnp.isfinite(y_nd)) & jnp.isfinite(norm)
@@ -127,7 +152,7 @@ class AbstractNonlinearSolver(eqx.Module):
             RESULTS.where(finite, RESULTS.nonlinear_max_steps_reached, RESULTS.nonfinite),
         )
         return NonlinearSolution(
-            value=y,
+            value=value,
             iterations=iterations.astype(jnp.int32),
             residual_norm=norm,
             result=result,

@@ -12,5 +12,6 @@ from .coulomb import CoulombFriction as CoulombFriction
 from .custom import CustomProjector as CustomProjector
 from .identity import Identity as Identity
 from .lcp import lcp_solve as lcp_solve
+from .located import EventLocated as EventLocated
 from .sign import SignResolvent as SignResolvent
 from .soc import SecondOrderCone as SecondOrderCone, project_soc as project_soc

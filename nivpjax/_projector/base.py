@@ -71,6 +71,10 @@ class AbstractProjector(eqx.Module):
     def __call__(self, z: Float[Array, " n"], ctx: ProjectionContext) -> Float[Array, " n"]:
         """Project `z` onto the set described by this projector in context `ctx`."""
 
+    def validate(self, n: int) -> None:
+        """Check, before any work, that this projector fits a state of size `n` (indices in
+        range). Raises `ValueError`. Default: nothing to check."""
+
     def violation(self, ctx: ProjectionContext) -> Float[Array, ""]:
         """How far the state at the end of a step, `ctx.y_iter`, violates a constraint that
         was not enforced during the step because it was inactive at its start `ctx.y_prev`

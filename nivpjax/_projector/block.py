@@ -23,6 +23,11 @@ class BlockProjector(AbstractProjector):
     blocks: tuple[tuple[tuple[int, ...], AbstractProjector], ...]
 
     def __init__(self, blocks):
+        if isinstance(blocks, AbstractProjector) or not isinstance(blocks, (list, tuple)):
+            raise TypeError(
+                "`blocks` must be a list of `(indices, projector)` pairs, got "
+                f"{type(blocks).__name__}."
+            )
         seen: set[int] = set()
         out = []
         for entry in blocks:
@@ -32,7 +37,15 @@ class BlockProjector(AbstractProjector):
                 raise TypeError(
                     f"`blocks` must be a sequence of `(indices, projector)` pairs, got {entry!r}."
                 ) from None
-            idx = tuple(int(i) for i in np.atleast_1d(np.asarray(indices, dtype=int)))
+            arr = np.atleast_1d(np.asarray(indices))
+            integer = np.issubdtype(arr.dtype, np.integer) and arr.dtype != np.bool_
+            if arr.ndim != 1 or not (integer or arr.size == 0):
+                raise TypeError(
+                    f"block indices must be integers, got {indices!r} (dtype {arr.dtype})."
+                )
+            idx = tuple(int(i) for i in arr)
+            if len(set(idx)) != len(idx):
+                raise ValueError(f"block indices repeat within a block: {list(idx)}.")
             if not isinstance(projector, AbstractProjector):
                 raise TypeError(
                     f"each block's projector must be an AbstractProjector, got {projector!r}."
@@ -51,6 +64,14 @@ class BlockProjector(AbstractProjector):
             idx = np.asarray(indices)
             out = out.at[idx].set(projector(z[idx], self._sub(ctx, indices, z.shape)))
         return out
+
+    def validate(self, n: int) -> None:
+        for indices, projector in self.blocks:
+            bad = [i for i in indices if not -n <= i < n]
+            if bad:
+                raise ValueError(
+                    f"BlockProjector indices {bad} are out of range for a state of size {n}."
+                )
 
     @staticmethod
     def _sub(ctx: ProjectionContext, indices, shape):

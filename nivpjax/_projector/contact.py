@@ -26,12 +26,14 @@ class UnilateralContact(AbstractProjector):
 
     and `restitution` $e$ (scalar or per contact, array or callable).
 
-    A contact is active in a stage when its gap predicted from the stage's start,
-    $g(y_{\text{prev}}) + \text{lookahead}\cdot h\,u(y_{\text{prev}})$, is $\le 0$ (the default
+    A contact is active in a stage when it is closed at the stage's start,
+    $g(y_{\text{prev}}) \le 0$, and not separating faster than round-off, or its predicted
+    gap
+    $g(y_{\text{prev}}) + \text{lookahead}\cdot h\,u(y_{\text{prev}})$ is $\le 0$ (the default
     lookahead $1/2$ is Moreau's midpoint rule; the active set is frozen within a stage so the
     nonlinear iteration cannot cycle between sets). On the active contacts the projection solves
 
-    $$ 0 \le p \perp W^T (z + B p) + e\,u^- \ge 0, \qquad P(z) = z + B p, $$
+    $$ 0 \le p \perp W^T (z + B p) + e\,\min(u^-, 0) \ge 0, \qquad P(z) = z + B p, $$
 
     Newton's impact law with the pre-impact velocity $u^- = W^T y_{\text{prev}}$: the
     projection of $z$ onto $\{v : W^T v + e u^- \ge 0 \text{ on active contacts}\}$ in the
@@ -68,28 +70,39 @@ class UnilateralContact(AbstractProjector):
             B = jnp.asarray(self.impulse_map(ctx.t, y0, ctx.args), dtype).reshape(Wt.T.shape)
         gap0 = jnp.atleast_1d(jnp.asarray(self.gap(ctx.t, y0, ctx.args), dtype))
         u_minus = Wt @ ctx.restrict(y0)
-        active = gap0 + self.lookahead * ctx.h * u_minus <= 0
-        return Wt, B, u_minus, active
+        # A contact is active when the gap predicted over the lookahead closes, and a closed
+        # contact stays active unless it separates faster than round-off (a resting contact
+        # carries velocities of order eps from the previous LCP).
+        eps = jnp.finfo(dtype).eps
+        roundoff = jnp.sqrt(eps) * (1.0 + jnp.max(jnp.abs(u_minus), initial=0.0))
+        predicted = gap0 + self.lookahead * ctx.h * u_minus <= 0
+        active = predicted | ((gap0 <= 0) & (u_minus <= roundoff))
+        return Wt, B, gap0, u_minus, active
 
     def violation(self, ctx: ProjectionContext):
-        """Penetration at the end of the step of contacts inactive at its start."""
+        """Penetration at the end of the step of contacts that were open at its start (not
+        enforced, or only activated by the lookahead inside the step)."""
         dtype = ctx.y_iter.dtype
-        _, _, _, active = self._start(ctx, dtype)
+        _, _, gap0, _, _ = self._start(ctx, dtype)
         gap1 = jnp.atleast_1d(jnp.asarray(self.gap(ctx.t, ctx.y_iter, ctx.args), dtype))
-        return jnp.max(jnp.where(active, 0.0, jnp.maximum(-gap1, 0.0)), initial=0.0)
+        return jnp.max(jnp.where(gap0 > 0, jnp.maximum(-gap1, 0.0), 0.0), initial=0.0)
 
     def impulsive(self, ctx: ProjectionContext):
-        """An active contact approaching at the start of the stage is an impact."""
-        _, _, u_minus, active = self._start(ctx, ctx.y_iter.dtype)
-        return jnp.any(active & (u_minus < 0))
+        """An active contact approaching at the start of the stage is an impact (velocities
+        below a round-off threshold, as a resting contact carries, are not)."""
+        _, _, _, u_minus, active = self._start(ctx, ctx.y_iter.dtype)
+        eps = jnp.finfo(u_minus.dtype).eps
+        threshold = jnp.sqrt(eps) * (1.0 + jnp.max(jnp.abs(u_minus), initial=0.0))
+        return jnp.any(active & (u_minus < -threshold))
 
     def __call__(self, z, ctx: ProjectionContext):
         z = jnp.asarray(z)
-        Wt, B, u_minus, active = self._start(ctx, z.dtype)
+        Wt, B, _, u_minus, active = self._start(ctx, z.dtype)
         e = jnp.broadcast_to(resolve(self.restitution, ctx, z.dtype), u_minus.shape)
         m = u_minus.shape[0]
         D = Wt @ B
         D = jnp.where(active[:, None] & active[None, :], D, jnp.eye(m, dtype=z.dtype))
-        q = jnp.where(active, Wt @ z + e * u_minus, 0.0)
+        # Restitution acts on approach velocities only: a separating contact gets u+ >= 0.
+        q = jnp.where(active, Wt @ z + e * jnp.minimum(u_minus, 0.0), 0.0)
         p = lcp_solve(D, q)
         return z + B @ p

@@ -39,6 +39,18 @@ class CoulombFriction(AbstractProjector):
     bound: Bound
     isotropic: bool = eqx.field(static=True, default=False)
 
+    def violation(self, ctx: ProjectionContext):
+        """A slip reversal inside the step (the sliding velocity changes sign between its
+        ends): the smaller of the two speeds, so the step is shortened until the reversal
+        lies within tolerance of a step boundary (Richardson extrapolation cannot see it)."""
+        v0, v1 = ctx.restrict(ctx.y_prev), ctx.restrict(ctx.y_iter)
+        if self.isotropic:
+            reversal = jnp.dot(v0, v1) < 0
+            size = jnp.minimum(jnp.linalg.norm(v0), jnp.linalg.norm(v1))
+            return jnp.where(reversal, size, 0.0)
+        size = jnp.minimum(jnp.abs(v0), jnp.abs(v1))
+        return jnp.max(jnp.where(v0 * v1 < 0, size, 0.0), initial=0.0)
+
     def __call__(self, z, ctx: ProjectionContext):
         z = jnp.asarray(z)
         c = jnp.maximum(resolve(self.bound, ctx, z.dtype), 0.0)

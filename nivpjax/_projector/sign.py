@@ -46,6 +46,13 @@ class SignResolvent(AbstractProjector):
         self.w_index = w
         self.tau = tau
 
+    def validate(self, n: int) -> None:
+        bad = [i for i in self.s_index + self.w_index if not -n <= i < n]
+        if bad:
+            raise ValueError(
+                f"SignResolvent indices {bad} are out of range for a state of size {n}."
+            )
+
     def __call__(self, z, ctx: ProjectionContext):
         z = jnp.asarray(z)
         s = np.asarray(self.s_index)

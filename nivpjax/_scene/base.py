@@ -52,6 +52,18 @@ def scene_state(y, n_states):
     return y[:n_states]
 
 
+class OnScene(eqx.Module):
+    """Adapts `fn(t, x, args)`, written for the scene's states, to the full state `y`.
+    A module rather than a closure, so that equal scenes hash equally and compiled solves
+    are reused."""
+
+    fn: Callable
+    n_states: int = eqx.field(static=True)
+
+    def __call__(self, t, y, args):
+        return self.fn(t, scene_state(y, self.n_states), args)
+
+
 class Scene(eqx.Module):
     r"""Smooth dynamics plus a tuple of effects, assembled into the state layout, the
     descriptor matrix, the composite projector and the error mask, so that the model is

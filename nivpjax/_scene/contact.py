@@ -51,28 +51,41 @@ class Contact(AbstractEffect):
         self.name = name
 
     def blocks(self, n_states, offset):
-        gap, pos = self.gap, np.asarray(self.positions)
-
-        def gap_full(t, y, args):
-            return jnp.atleast_1d(gap(t, scene_state(y, n_states), args))
-
-        def normals(t, y, args):
-            x = scene_state(y, n_states)
-            return jax.jacfwd(lambda q: jnp.atleast_1d(gap(t, x.at[pos].set(q), args)))(x[pos])
-
-        if self.inverse_mass is None:
-            impulse_map = None
-        else:
-            Minv = self.inverse_mass
-
-            def impulse_map(t, y, args):
-                return Minv @ normals(t, y, args).T
-
+        normals = _Normals(self.gap, n_states, self.positions)
+        impulse_map = None if self.inverse_mass is None else _Impulses(normals, self.inverse_mass)
         projector = UnilateralContact(
-            gap=gap_full,
+            gap=_Gaps(self.gap, n_states),
             velocity_map=normals,
             impulse_map=impulse_map,
             restitution=self.restitution,
             lookahead=self.lookahead,
         )
         return [(self.velocities, projector)]
+
+
+class _Gaps(eqx.Module):
+    gap: object
+    n_states: int = eqx.field(static=True)
+
+    def __call__(self, t, y, args):
+        return jnp.atleast_1d(self.gap(t, scene_state(y, self.n_states), args))
+
+
+class _Normals(eqx.Module):
+    # W^T = dg/dq by autodiff of the gap function.
+    gap: object
+    n_states: int = eqx.field(static=True)
+    positions: tuple[int, ...] = eqx.field(static=True)
+
+    def __call__(self, t, y, args):
+        x = scene_state(y, self.n_states)
+        pos = np.asarray(self.positions)
+        return jax.jacfwd(lambda q: jnp.atleast_1d(self.gap(t, x.at[pos].set(q), args)))(x[pos])
+
+
+class _Impulses(eqx.Module):
+    normals: _Normals
+    inverse_mass: object
+
+    def __call__(self, t, y, args):
+        return self.inverse_mass @ self.normals(t, y, args).T

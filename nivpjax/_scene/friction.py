@@ -2,7 +2,7 @@ import equinox as eqx
 import numpy as np
 
 from .._projector import CoulombFriction
-from .base import AbstractEffect, scene_state
+from .base import AbstractEffect, OnScene
 
 
 class Friction(AbstractEffect):
@@ -31,11 +31,5 @@ class Friction(AbstractEffect):
         self.name = name
 
     def blocks(self, n_states, offset):
-        bound = self.bound
-        if callable(bound):
-
-            def resolved(t, y, args):
-                return bound(t, scene_state(y, n_states), args)
-        else:
-            resolved = bound
-        return [(self.velocities, CoulombFriction(resolved, isotropic=self.isotropic))]
+        bound = OnScene(self.bound, n_states) if callable(self.bound) else self.bound
+        return [(self.velocities, CoulombFriction(bound, isotropic=self.isotropic))]

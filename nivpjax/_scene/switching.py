@@ -6,14 +6,38 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from .._projector import AbstractProjector, Box, NonNegative
-from .base import AbstractEffect
+from .._projector import AbstractProjector, Box, EventLocated, NonNegative
+from .base import AbstractEffect, OnScene, scene_state
+
+
+class _SaturationSurface(eqx.Module):
+    signal: Callable
+    n_states: int = eqx.field(static=True)
+    lower: object
+    upper: object
+
+    def __call__(self, t, y, args):
+        u = jnp.atleast_1d(self.signal(t, scene_state(y, self.n_states), args))
+        return jnp.concatenate([u - self.lower, u - self.upper])
+
+
+class _DiodeSurface(eqx.Module):
+    # The voltage each diode would see without current: it changes sign at a switch.
+    voltage: Callable
+    n_states: int = eqx.field(static=True)
+    n: int = eqx.field(static=True)
+
+    def __call__(self, t, y, args):
+        x = scene_state(y, self.n_states)
+        return jnp.atleast_1d(self.voltage(t, x, jnp.zeros(self.n, y.dtype), args))
 
 
 class Relay(AbstractEffect):
     r"""A relay / sign nonlinearity $w \in \operatorname{sign}(s(t, x))$ as `size`
     multipliers $w \in [-1, 1]$ (Filippov's convexification: in sliding mode $w$ takes the
-    equivalent-control value). The dynamics read it as `multipliers[name]`.
+    equivalent-control value). The dynamics read it as `multipliers[name]`. Crossings of
+    $s = 0$ inside a step are located by the step-size controller
+    ([`nivpjax.EventLocated`][]).
 
     - `switch(t, x, args) -> (size,)`: the switching function $s$.
     """
@@ -27,7 +51,8 @@ class Relay(AbstractEffect):
         return self.n
 
     def blocks(self, n_states, offset):
-        return [(np.arange(offset, offset + self.n), Box(-1.0, 1.0))]
+        projector = EventLocated(Box(-1.0, 1.0), OnScene(self.switch, n_states))
+        return [(np.arange(offset, offset + self.n), projector)]
 
     def constraint(self, t, x, lam, args):
         return self.switch(t, x, args)
@@ -53,7 +78,9 @@ class Saturation(AbstractEffect):
         return True
 
     def blocks(self, n_states, offset):
-        return [(np.arange(offset, offset + self.n), Box(self.lower, self.upper))]
+        surface = _SaturationSurface(self.signal, n_states, self.lower, self.upper)
+        projector = EventLocated(Box(self.lower, self.upper), surface)
+        return [(np.arange(offset, offset + self.n), projector)]
 
     def constraint(self, t, x, lam, args):
         return jnp.asarray(self.signal(t, x, args)) - lam
@@ -78,7 +105,8 @@ class Diode(AbstractEffect):
         return True
 
     def blocks(self, n_states, offset):
-        return [(np.arange(offset, offset + self.n), NonNegative())]
+        projector = EventLocated(NonNegative(), _DiodeSurface(self.voltage, n_states, self.n))
+        return [(np.arange(offset, offset + self.n), projector)]
 
     def constraint(self, t, x, lam, args):
         return self.voltage(t, x, lam, args)

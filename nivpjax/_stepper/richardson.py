@@ -1,5 +1,8 @@
 """Richardson step doubling: an error estimate for any stepper."""
 
+import jax
+import jax.numpy as jnp
+
 from .._solution import StepStats
 from .base import AbstractStepper, StepOutput
 
@@ -25,8 +28,13 @@ class Richardson(AbstractStepper):
         return self.stepper.order + 1
 
     def step(self, model, t0, h, y0, args):
-        full = self.stepper.step(model, t0, h, y0, args)
-        half1 = self.stepper.step(model, t0, 0.5 * h, y0, args)
+        # The full step and the first half step start from the same state: one batched
+        # (vmapped) copy of the stepper instead of two keeps the compiled program small.
+        both = jax.vmap(lambda hh: self.stepper.step(model, t0, hh, y0, args))(
+            jnp.stack([h, 0.5 * h])
+        )
+        full = jax.tree.map(lambda x: x[0], both)
+        half1 = jax.tree.map(lambda x: x[1], both)
         half2 = self.stepper.step(model, t0 + 0.5 * h, 0.5 * h, half1.y1, args)
         p = self.stepper.order
         y_error = (half2.y1 - full.y1) / (2.0**p - 1.0)

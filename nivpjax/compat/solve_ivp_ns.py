@@ -133,7 +133,8 @@ def _solver(name, sopts):
 
 
 def _stepper(name, solver, iopts):
-    opt.check("integrator_opts", iopts, opt.INTEGRATOR_MAPPED, opt.INTEGRATOR_NO_EFFECT)
+    allowed = {"theta": {"theta"}, "composite": {"gamma"}}.get(name, set())
+    opt.check(f"integrator_opts for method '{name}'", iopts, allowed, opt.INTEGRATOR_NO_EFFECT)
     if name == "backward_euler":
         return BackwardEuler(solver=solver)
     if name == "trapezoidal":
@@ -152,6 +153,8 @@ def _controller(adaptive, aopts, atol, rtol, h0, n, skip, component_slices, alge
     if not adaptive:
         return ConstantStepSize(h_min=h_min), h0
     mode = str(aopts.get("mode", "classic")).lower()
+    if mode not in ("classic", "ratio"):
+        raise ValueError(f"adaptive_opts mode must be 'classic' or 'ratio', got {mode!r}.")
     preset = str(aopts.get("controller", "pi3040")).lower()
     if mode != "classic" and preset not in opt.FILTERS:
         raise ValueError(
@@ -170,6 +173,11 @@ def _controller(adaptive, aopts, atol, rtol, h0, n, skip, component_slices, alge
         _slices_to_indices(component_slices, n) if component_slices else [[i] for i in range(n)]
     )
     for b in skipped:
+        if not 0 <= int(b) < len(blocks):
+            raise ValueError(
+                f"`skip_error_indices` entry {b} is out of range: there are {len(blocks)} "
+                "components (or component_slices)."
+            )
         mask[blocks[int(b)]] = False
     order = aopts.get("method_order", aopts.get("p"))
     controller = PIDController(

@@ -1,0 +1,260 @@
+"""Exact references for the mechanical scenes of `nivpjax.scenes`, written without nivpjax.
+
+Shared by the example scripts in this folder and by `tests/test_scenes_mechanics.py`. Every
+reference is plain NumPy/SciPy: closed forms where the motion is piecewise polynomial or
+harmonic, and an event-driven integration (DOP853 at rtol 1e-12, events located by root
+finding) where the slip phase of the spring slider has slip-weakening friction. Two small
+utilities for the examples (timing a compiled call, the output folder) close the file.
+"""
+
+import os
+import time
+
+import numpy as np
+from scipy.integrate import solve_ivp
+
+
+# ----------------------------------------------------------------------------------------------
+# Bouncing ball: q'' = -g in flight, v+ = -e v- at q = 0.
+
+
+def ball_impacts(height, velocity, e, g, n=400):
+    """Impact times, pre-impact speeds and the accumulation (Zeno) time of a ball released at
+    `height` with upward `velocity`.
+
+    The first impact is at $t_1 = (v_0 + u_1)/g$ with speed $u_1 = \\sqrt{v_0^2 + 2gH}$; the
+    $k$-th rebound leaves at $e^k u_1$ and flies $2 e^k u_1/g$, so the impacts accumulate at
+    $t_\\infty = t_1 + 2 e u_1 / (g(1 - e))$.
+
+    **Returns:** `(t_impacts, speeds_in, t_inf)`, arrays of length `n`.
+    """
+    u1 = np.sqrt(velocity**2 + 2 * g * height)
+    t1 = (velocity + u1) / g
+    k = np.arange(n)
+    speeds_in = u1 * e**k
+    flights = 2 * u1 * e ** (k + 1) / g
+    t_impacts = t1 + np.concatenate([[0.0], np.cumsum(flights[:-1])])
+    t_inf = t1 + 2 * e * u1 / (g * (1 - e))
+    return t_impacts, speeds_in, t_inf
+
+
+def ball_state(t, height, velocity, e, g):
+    """The exact state `(q, v)` of the bouncing ball at the times `t` (array); at rest after
+    the accumulation time."""
+    t = np.asarray(t, dtype=float)
+    t_imp, speeds, t_inf = ball_impacts(height, velocity, e, g)
+    k = np.searchsorted(t_imp, t, side="right")  # impacts at or before t
+    before = k == 0
+    j = np.maximum(k - 1, 0)
+    tau = t - t_imp[j]
+    w = e * speeds[j]  # take-off speed after impact j
+    q = np.where(before, height + velocity * t - 0.5 * g * t**2, w * tau - 0.5 * g * tau**2)
+    v = np.where(before, velocity - g * t, w - g * tau)
+    rest = t >= t_inf
+    return np.where(rest, 0.0, q), np.where(rest, 0.0, v)
+
+
+# ----------------------------------------------------------------------------------------------
+# Spring slider: m s'' = k (V t - s) - c s' - mu(s) N Sign(s').
+
+
+def slider_constant_friction(s0, v0, m, k, mu, normal, t_end):
+    """Exact piecewise-harmonic motion of the undriven, undamped slider with constant
+    friction $F = \\mu N$: while slipping with sign $\\sigma$, $s$ oscillates about
+    $s_c = -\\sigma F/k$ with $\\omega = \\sqrt{k/m}$; when $v = 0$ it sticks for good if
+    $|k s| \\le F$, otherwise it slips back (half a period).
+
+    **Returns:** `(phases, t_stick)`: `phases` a list of `(t_start, s_start, v_start, sigma)`
+    (sigma 0 for the final stick) and the time it sticks (`inf` if not before `t_end`).
+    """
+    omega = np.sqrt(k / m)
+    force = mu * normal
+    t, s, v = 0.0, float(s0), float(v0)
+    phases = []
+    while t < t_end:
+        if v == 0.0:
+            if abs(k * s) <= force:
+                phases.append((t, s, 0.0, 0))
+                return phases, t
+            sigma = -np.sign(s)
+        else:
+            sigma = np.sign(v)
+        phases.append((t, s, v, sigma))
+        centre = -sigma * force / k
+        a, b = s - centre, v / omega
+        # s - centre = R cos(omega tau - phi): v vanishes again at omega tau = phi (mod pi).
+        phi = np.arctan2(b, a)
+        tau = (phi if phi > 0 else phi + np.pi) / omega
+        s = centre + np.hypot(a, b) * np.cos(omega * tau - phi)
+        t, v = t + tau, 0.0
+    return phases, np.inf
+
+
+def slider_constant_friction_state(t, phases, m, k, mu, normal):
+    """Evaluate `slider_constant_friction`'s phases at the times `t`."""
+    t = np.asarray(t, dtype=float)
+    omega = np.sqrt(k / m)
+    starts = np.array([p[0] for p in phases])
+    i = np.clip(np.searchsorted(starts, t, side="right") - 1, 0, len(phases) - 1)
+    s_out, v_out = np.empty_like(t), np.empty_like(t)
+    for j, (t0, s0, v0, sigma) in enumerate(phases):
+        sel = i == j
+        tau = t[sel] - t0
+        if sigma == 0:
+            s_out[sel], v_out[sel] = s0, 0.0
+            continue
+        centre = -sigma * mu * normal / k
+        s_out[sel] = centre + (s0 - centre) * np.cos(omega * tau) + v0 / omega * np.sin(omega * tau)
+        v_out[sel] = -omega * (s0 - centre) * np.sin(omega * tau) + v0 * np.cos(omega * tau)
+    return s_out, v_out
+
+
+def slider_event_driven(p, s0, v0, t_end, t_eval):
+    """Event-driven reference for the full spring-slider law (drive, damping, slip-weakening
+    $\\mu(s) = \\mu_k + (\\mu_s - \\mu_k) e^{-|s|/D_c}$), `p` the scene's `args` as floats.
+
+    Stick phases are exact: $s$ stays put until the spring force $k(Vt - s)$ exceeds
+    $\\mu(s) N$, a time found in closed form. Slip phases integrate the smooth ODE with DOP853
+    (rtol 1e-12, atol 1e-14) until $v = 0$ (located by the integrator's root finder); there
+    the block sticks if $|k(Vt - s)| \\le \\mu(s) N$ and otherwise slips on.
+
+    **Returns:** `(s, v)` at `t_eval` and the list of `(t, mode)` switches (mode +1/-1 slip
+    direction, 0 stick).
+    """
+    m, k, c, N, V = p["m"], p["k"], p["c"], p["N"], p["V"]
+
+    def mu(s):
+        return p["mu_k"] + (p["mu_s"] - p["mu_k"]) * np.exp(-abs(s) / p["Dc"])
+
+    t_eval = np.asarray(t_eval, dtype=float)
+    s_out, v_out = np.full_like(t_eval, np.nan), np.full_like(t_eval, np.nan)
+    t, s, v = 0.0, float(s0), float(v0)
+    switches = []
+    while t < t_end:
+        if v == 0.0:
+            spring = k * (V * t - s)
+            if abs(spring) <= mu(s) * N:
+                # Stick until the spring force reaches the static bound (never if V = 0).
+                if V == 0.0:
+                    t_next = np.inf
+                else:
+                    t_next = (s + np.sign(V) * mu(s) * N / k) / V
+                    t_next = max(t_next, t)
+                switches.append((t, 0))
+                sel = (t_eval >= t) & (t_eval <= t_next)
+                s_out[sel], v_out[sel] = s, 0.0
+                t = t_next
+                sigma = np.sign(V)
+            else:
+                sigma = np.sign(spring)
+        else:
+            sigma = np.sign(v)
+        if t >= t_end:
+            break
+        switches.append((t, int(sigma)))
+
+        def rhs(t_, x, sigma=sigma):
+            return [x[1], (k * (V * t_ - x[0]) - c * x[1] - sigma * mu(x[0]) * N) / m]
+
+        def stop(t_, x, sigma=sigma):
+            return x[1]
+
+        stop.terminal = True
+        stop.direction = -sigma
+        # From v = 0 the event function starts at zero; `direction` skips that root.
+        sel = (t_eval >= t) & (t_eval <= t_end)
+        sol = solve_ivp(
+            rhs,
+            (t, t_end),
+            [s, v],
+            method="DOP853",
+            rtol=1e-12,
+            atol=1e-14,
+            events=stop,
+            dense_output=True,
+        )
+        t_stop = sol.t_events[0][0] if sol.t_events[0].size else t_end
+        sel = sel & (t_eval <= t_stop)
+        if np.any(sel):
+            x = sol.sol(t_eval[sel])
+            s_out[sel], v_out[sel] = x[0], x[1]
+        if sol.t_events[0].size:
+            s, v = sol.y_events[0][0][0], 0.0
+        else:
+            s, v = sol.y[0, -1], sol.y[1, -1]
+        t = t_stop
+    return s_out, v_out, switches
+
+
+# ----------------------------------------------------------------------------------------------
+# Block on a plane: isotropic Coulomb friction, constant deceleration mu g.
+
+
+def block_state(t, velocity, mu, g):
+    """Exact position and velocity (2-D) of the block sliding from the origin: it moves along
+    $\\hat v_0$ with speed $|v_0| - \\mu g t$ until $t^* = |v_0|/(\\mu g)$, then rests at
+    distance $|v_0|^2/(2\\mu g)$.
+
+    **Returns:** `(p, v, t_stop)` with `p`, `v` of shape `t.shape + (2,)`."""
+    t = np.asarray(t, dtype=float)
+    v0 = np.asarray(velocity, dtype=float)
+    speed = np.linalg.norm(v0)
+    direction = v0 / speed
+    t_stop = speed / (mu * g)
+    tc = np.minimum(t, t_stop)[..., None]
+    p = direction * (speed * tc - 0.5 * mu * g * tc**2)
+    v = direction * (speed - mu * g * tc)
+    return p, v, t_stop
+
+
+# ----------------------------------------------------------------------------------------------
+# Ball stack: a dropped column with equal spacing and plastic impacts.
+
+
+def stack_drop_state(t, n, radius, spacing, g):
+    """Exact heights and velocities of the column of `n` unit balls released at rest with
+    ball 0 on the floor and gaps `spacing` between the others, restitution 0.
+
+    All the balls above the last stopped one fall together, so their gaps stay `spacing`;
+    ball $i$ lands plastically on the (resting) column below after falling $i d$, at
+    $t_i = \\sqrt{2 i d/g}$, and stays at $r(2i + 1)$.
+
+    **Returns:** `(q, v, t_land)`, `q` and `v` of shape `t.shape + (n,)`.
+    """
+    t = np.asarray(t, dtype=float)[..., None]
+    i = np.arange(n)
+    t_land = np.sqrt(2 * i * spacing / g)
+    start = radius + i * (2 * radius + spacing)
+    flying = t < t_land
+    q = np.where(flying, start - 0.5 * g * t**2, radius * (2 * i + 1))
+    v = np.where(flying, -g * t, 0.0)
+    return q, v, t_land
+
+
+def stack_contact_forces(net_force):
+    """Contact forces from the net contact force on each ball (bottom first): contact $i$
+    (floor for $i = 0$, ball $i-1$ on ball $i$ otherwise) pushes ball $i$ up and ball $i-1$
+    down, so the net force on ball $i$ is $\\lambda_i - \\lambda_{i+1}$ and
+    $\\lambda_i = \\sum_{j \\ge i} F_j$."""
+    net_force = np.asarray(net_force)
+    return np.cumsum(net_force[..., ::-1], axis=-1)[..., ::-1]
+
+
+# ----------------------------------------------------------------------------------------------
+# Example utilities.
+
+
+def output_path(name):
+    """`examples/output/<name>`, creating the (git-ignored) folder."""
+    folder = os.path.join(os.path.dirname(os.path.abspath(__file__)), "output")
+    os.makedirs(folder, exist_ok=True)
+    return os.path.join(folder, name)
+
+
+def timed(fn, *args):
+    """`(fn(*args), seconds)`, waiting for asynchronous JAX results."""
+    import jax
+
+    start = time.perf_counter()
+    out = jax.block_until_ready(fn(*args))
+    return out, time.perf_counter() - start
