@@ -25,7 +25,8 @@ class SemismoothNewton(AbstractNonlinearSolver):
 
     **Arguments:**
 
-    - `rtol`, `atol`: stop when $\max_i |G_i| / (\text{atol} + \text{rtol}|y_i|) \le 1$.
+    - `rtol`, `atol`: stop when $\max_i |G_i| / (\text{atol} + \text{rtol}|y_i|) \le 1$,
+      after at least one iteration.
     - `max_steps`: cap on Newton iterations.
     - `full_steps`: number of initial iterations without line search.
     - `sigma`, `beta`, `max_backtracks`: Armijo constant, backtracking factor and cap.
@@ -50,7 +51,10 @@ class SemismoothNewton(AbstractNonlinearSolver):
             y, g, k, history = carry
             return (
                 (k < self.max_steps)
-                & (scaled_error(g, y, rtol, atol) > 1)
+                # At least one iteration: with a tiny step the whole update of the stage can
+                # lie below the tolerance, and stopping at the initial guess would freeze
+                # the state (with a zero error estimate, so the controller cannot notice).
+                & ((k == 0) | (scaled_error(g, y, rtol, atol) > 1))
                 & jnp.all(jnp.isfinite(g))
             )
 
