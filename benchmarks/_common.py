@@ -142,3 +142,11 @@ def markdown_table(headers, rows):
     ]
     lines += ["| " + " | ".join(r) + " |" for r in cells]
     return "\n".join(lines)
+
+
+def compile_timed(fn, *args):
+    """`jax.jit(fn)` lowered and compiled for `args`: (executable, seconds). The time
+    covers tracing (the library's Python-side assembly included) and XLA compilation."""
+    t0 = time.perf_counter()
+    compiled = jax.jit(fn).lower(*args).compile()
+    return compiled, time.perf_counter() - t0
