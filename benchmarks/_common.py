@@ -6,6 +6,8 @@ import os
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
+import contextlib  # noqa: E402
+import signal  # noqa: E402
 import statistics  # noqa: E402
 import time  # noqa: E402
 
@@ -150,3 +152,26 @@ def compile_timed(fn, *args):
     t0 = time.perf_counter()
     compiled = jax.jit(fn).lower(*args).compile()
     return compiled, time.perf_counter() - t0
+
+
+class TimeLimit(BaseException):
+    """Raised by `time_limit` (a BaseException, so that a library's `except Exception`
+    does not swallow it)."""
+
+
+@contextlib.contextmanager
+def time_limit(seconds):
+    """Interrupt the (pure Python) code inside after `seconds` of wall time (SIGALRM;
+    main thread only). Used for the reference package and scipy, which can stall in
+    endless tiny steps."""
+
+    def handler(signum, frame):
+        raise TimeLimit(f"over {seconds:g} s")
+
+    old = signal.signal(signal.SIGALRM, handler)
+    signal.setitimer(signal.ITIMER_REAL, seconds)
+    try:
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, old)

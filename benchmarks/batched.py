@@ -4,7 +4,9 @@ For each batch size N the sweep compiles `jax.jit(jax.vmap(solve_one))` over N p
 values (drawn uniformly at random, fixed seed, nested: the first N of one draw) and
 reports the batch run time (median of repeats after compilation), trajectories/s,
 accepted step-trajectories/s (accepted steps summed over members per second), compile
-time, memory and the final-state error of the worst member against the exact solution.
+time, memory and the final position error of the worst member against the exact solution
+(the position, not the whole state: the velocity jumps at impacts and friction switches,
+and a member with an event within the tolerance of `t1` would report the jump).
 
 Memory: "XLA buffers" = argument + output + temporary bytes of the compiled executable
 (`Compiled.memory_analysis()`, what XLA allocates for one call); "RSS high-water growth"
@@ -31,11 +33,12 @@ import numpy as np
 import nivpjax as nj
 
 from . import reference_models
-from ._common import block, median_time
+from ._common import TimeLimit, block, median_time, time_limit
 from .cases import CASES
 
 
 CHUNK = 100
+REF_LIMIT = 120.0  # seconds per reference run in the loop
 
 SWEEPS = {
     "ball": dict(
@@ -144,7 +147,7 @@ def run_sweep(name, quick, log):
         compiled_by_size[n] = compiled
         x, acc, rej, result = (np.asarray(o) for o in out)
         exact = _exact_final(case, sweep, all_params[:n])
-        errs = np.max(np.abs(x - exact), axis=1)
+        errs = np.abs(x[:, 0] - exact[:, 0])  # position (see the module docstring)
         err = float(np.max(errs))
         failed = int(np.sum(result != nj.RESULTS.successful._value))
         rows.append(
@@ -206,16 +209,25 @@ def run_sweep(name, quick, log):
     base = case.build()[2]
     _, x0, _ = case.build()
     subset = all_params[: cfg["ref_subset"]]
-    times, errs = [], []
+    times, errs, timeouts = [], [], 0
     exact = _exact_final(case, sweep, subset)
     for p, ex in zip(subset, exact):
         kw, to_x, label = reference_models.BUILDERS[case.name](
             sweep["set_ref"](base, float(p)), x0, case.t1, sweep["rtol"], sweep["rtol"] * 1e-3
         )
         t0 = time.perf_counter()
-        t, y, *_ = reference_models.run(kw)
+        try:
+            with time_limit(REF_LIMIT):
+                t, y, *_ = reference_models.run(kw)
+        except TimeLimit:
+            # Counted at the limit: a lower bound on its time.
+            times.append(REF_LIMIT)
+            errs.append(np.inf)
+            timeouts += 1
+            continue
         times.append(time.perf_counter() - t0)
-        errs.append(float(np.max(np.abs(to_x(y)[-1] - ex))) if t[-1] >= case.t1 - 1e-9 else np.inf)
+        done = t[-1] >= case.t1 - 1e-9
+        errs.append(float(abs(to_x(y)[-1][0] - ex[0])) if done else np.inf)
     ref = dict(
         scene=name,
         label=label,
@@ -223,6 +235,7 @@ def run_sweep(name, quick, log):
         per_traj=float(np.mean(times)),
         max_error=float(np.max(errs)),
         rtol=sweep["rtol"],
+        timeouts=timeouts,
     )
     log(f"  reference loop over {len(subset)} values: {ref['per_traj']:.2f} s per trajectory")
     return dict(sweep=sweep, rows=rows, mitigation=mitigation, reference=ref)

@@ -362,7 +362,7 @@ def batched_table(batched):
             "waste",
             "XLA buffers MB",
             "RSS high-water growth MB",
-            "final err median / max",
+            "final position err median / max",
             "failed",
             "reference loop x N",
             "ref / nivpjax per traj",
@@ -378,9 +378,14 @@ def reference_loop_lines(batched):
         out.append(
             f"- {b['sweep']['case']}: reference ({ref['label']}, rtol {ref['rtol']:g}) in a "
             f"Python loop over {ref['n']} of the parameter values: "
-            f"{fmt_time(ref['per_traj'])} per trajectory (max final error "
-            f"{fmt_num(ref['max_error'])}); the 'reference loop x N' column multiplies this by "
-            "N (extrapolated, not run)."
+            f"{fmt_time(ref['per_traj'])} per trajectory (max final position error "
+            f"{fmt_num(ref['max_error'])}"
+            + (
+                f"; {ref['timeouts']} run(s) stopped at the time limit, counted at the limit"
+                if ref.get("timeouts")
+                else ""
+            )
+            + "); the 'reference loop x N' column multiplies this by N (extrapolated, not run)."
         )
     return "\n".join(out)
 
@@ -625,11 +630,10 @@ def write_documents(wp, batched, grads, meta, quick):
         "waste = sum over members of (max attempts - own attempts) / (N x max attempts): "
         "the share of the batch's loop iterations in which a member has already finished "
         "(nivpjax does nothing about it by itself: a finished member still runs the masked "
-        "loop body, so a batch costs N x the slowest member's attempts). final err: "
-        "max-norm error of the final state against the exact solution per member; a max "
-        "far above the median is a member whose impact falls within the controller's "
-        "tolerance of t1 (it ends just before the impact, with the pre-impact velocity: an "
-        "O(1) error in this norm).",
+        "loop body, so a batch costs N x the slowest member's attempts). final position err: "
+        "|position(t1) - exact| per member (the position only: the velocity jumps at "
+        "impacts, and a member whose impact falls within the controller's tolerance of t1 "
+        "would report the jump).",
         "",
         bt,
         "",

@@ -17,7 +17,7 @@ import numpy as np
 import nivpjax as nj
 
 from . import reference_models, regularised
-from ._common import auto_number, compile_timed, median_time
+from ._common import TimeLimit, auto_number, compile_timed, median_time, time_limit
 from .cases import CASES
 
 
@@ -47,6 +47,7 @@ def settings(quick):
             strengths=lambda name: regularised.STRENGTHS[name][::2],
             repeats=3,
             slow_skip=15.0,
+            run_limit=30.0,
         )
     return dict(
         rtols=(1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-7),
@@ -57,6 +58,7 @@ def settings(quick):
         strengths=lambda name: regularised.STRENGTHS[name],
         repeats=7,
         slow_skip=30.0,
+        run_limit=90.0,
     )
 
 
@@ -158,7 +160,7 @@ def nivpjax_rows(case, configs, rtols, repeats, log):
 
 
 # --- the reference package -------------------------------------------------------------------
-def reference_rows(case, rtols, repeats, slow_skip, log):
+def reference_rows(case, rtols, repeats, slow_skip, run_limit, log):
     _, x0, p = case.build()
     rows = []
     builder = reference_models.BUILDERS[case.name]
@@ -167,7 +169,24 @@ def reference_rows(case, rtols, repeats, slow_skip, log):
         kw, to_x, label = builder(p, x0, case.t1, rtol, rtol * ATOL_FACTOR, **extra)
         t0 = time.perf_counter()
         try:
-            out = reference_models.run(kw)
+            with time_limit(run_limit):
+                out = reference_models.run(kw)
+        except TimeLimit:
+            rows.append(
+                _row(
+                    case,
+                    "reference",
+                    label,
+                    "",
+                    rtol,
+                    time=time.perf_counter() - t0,
+                    status=f"TIMEOUT: stopped after {run_limit:g} s",
+                )
+            )
+            log(
+                f"  reference rtol {rtol:.0e}: over {run_limit:g} s, stopped; tighter rtols skipped"
+            )
+            break
         except Exception as err:  # the reference's failure is a result here
             rows.append(
                 _row(
@@ -241,14 +260,32 @@ def diffrax_rows(case, solvers, strengths, rtols, repeats, log):
     return rows
 
 
-def scipy_rows(case, methods, strengths, rtols, repeats, slow_skip, log):
+def scipy_rows(case, methods, strengths, rtols, repeats, slow_skip, run_limit, log):
     _, x0, _ = case.build()
     rows = []
     for method in methods:
         for reg in strengths:
             for rtol in rtols:
-                r = regularised.run_scipy(case, x0, method, rtol, rtol * ATOL_FACTOR, reg, repeats)
                 label = regularised.reg_label(case.name, reg)
+                try:
+                    with time_limit(run_limit):
+                        r = regularised.run_scipy(
+                            case, x0, method, rtol, rtol * ATOL_FACTOR, reg, repeats
+                        )
+                except TimeLimit:
+                    rows.append(
+                        _row(
+                            case,
+                            "scipy",
+                            f"scipy {method}",
+                            label,
+                            rtol,
+                            time=run_limit,
+                            status=f"TIMEOUT: stopped after {run_limit:g} s",
+                        )
+                    )
+                    log(f"  scipy {method} {label} rtol {rtol:.0e}: over {run_limit:g} s, stopped")
+                    break
                 rows.append(_row(case, "scipy", f"scipy {method}", label, rtol, **r))
                 log(
                     f"  scipy {method} {label} rtol {rtol:.0e}: {r['time'] * 1e3:.1f} ms, "
@@ -340,11 +377,20 @@ def run_scene(name, quick, log):
     cfg = settings(quick)
     log(f"[{name}] {case.title}")
     rows = nivpjax_rows(case, cfg["nj_configs"], cfg["nj_rtols"], cfg["repeats"], log)
-    rows += reference_rows(case, cfg["rtols"], cfg["repeats"], cfg["slow_skip"], log)
+    rows += reference_rows(
+        case, cfg["rtols"], cfg["repeats"], cfg["slow_skip"], cfg["run_limit"], log
+    )
     strengths = cfg["strengths"](name)
     rows += diffrax_rows(case, cfg["diffrax"], strengths, cfg["rtols"], cfg["repeats"], log)
     rows += scipy_rows(
-        case, cfg["scipy"], strengths, cfg["rtols"], cfg["repeats"], cfg["slow_skip"], log
+        case,
+        cfg["scipy"],
+        strengths,
+        cfg["rtols"],
+        cfg["repeats"],
+        cfg["slow_skip"],
+        cfg["run_limit"],
+        log,
     )
     compute_errors(case, rows)
     return dict(

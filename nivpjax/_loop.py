@@ -101,6 +101,7 @@ def run(
     save_attempts: bool,
     kind: str,
     progress,
+    checkpoints: int | None = None,
 ) -> Solution:
     dtype = y0.dtype
     n = y0.shape[0]
@@ -110,7 +111,11 @@ def run(
     h_min, h_max = controller.bounds
     h_min = default_h_min(t0, t1, dtype) if h_min is None else jnp.asarray(h_min, dtype)
     h = jnp.maximum(h, h_min)
-    result0 = RESULTS.successful
+    result0 = RESULTS.where(
+        model.initial_violation(t0, h, y0, args) > 0,
+        RESULTS.initial_state_infeasible,
+        RESULTS.successful,
+    )
     if model.has_algebraic:
         init = model.consistent_initial_state(stepper.solver, t0, h, y0, args)
         ok = init.result == RESULTS.successful
@@ -216,7 +221,15 @@ def run(
             attempts=attempts,
         )
 
-    final = eqxi.while_loop(cond, body, state, max_steps=max_steps, buffers=_buffers, kind=kind)
+    final = eqxi.while_loop(
+        cond,
+        body,
+        state,
+        max_steps=max_steps,
+        buffers=_buffers,
+        kind=kind,
+        checkpoints=checkpoints if kind == "checkpointed" else None,
+    )
     result = RESULTS.where(
         (final.result == RESULTS.successful) & (final.t < t1),
         RESULTS.time_max_steps_reached,

@@ -84,8 +84,17 @@ class Model(eqx.Module):
         return ProjectionContext(t=t, h=h, y_prev=y0, y_iter=y1, rho=rho, args=args)
 
     def violation(self, t1, h, y0, y1, args):
-        """Constraint violation at the end of a step (see `AbstractProjector.violation`)."""
-        return self.projector.violation(self._context(t1, h, y0, y1, args))
+        """Constraint violation at the end of a step (see `AbstractProjector.violation`).
+        The context carries the vector field at the end point (`rate`)."""
+        rho = jnp.full_like(y1, h)
+        rate = self.f(t1, y1, args)
+        ctx = ProjectionContext(t=t1, h=h, y_prev=y0, y_iter=y1, rho=rho, args=args, rate=rate)
+        return self.projector.violation(ctx)
+
+    def initial_violation(self, t0, h, y0, args):
+        """Violation of the initial state no stage can restore (see
+        `AbstractProjector.initial_violation`)."""
+        return self.projector.initial_violation(self._context(t0, h, y0, y0, args))
 
     def impulsive(self, t1, h, y0, y1, args):
         """Whether a stage from `y0` to `y1` contained an impulse."""

@@ -17,6 +17,11 @@ class RESULTS(optx.RESULTS):  # pyright: ignore[reportGeneralTypeIssues]
     time_max_steps_reached = (
         "The maximum number of time steps was reached before `t1`. Increase `max_steps`."
     )
+    initial_state_infeasible = (
+        "The initial state violates a constraint that the integrator cannot restore (e.g. a "
+        "contact that starts penetrated: velocity-level contact never pushes a body out). "
+        "Move `y0` into the admissible set."
+    )
     line_search_failure = (
         "The Armijo line search of semismooth Newton found no step that decreases the merit."
     )

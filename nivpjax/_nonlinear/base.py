@@ -24,8 +24,9 @@ class NonlinearSolution(eqx.Module):
     **Fields:**
 
     - `value`: the solution: the final iterate $y$, with the components the projector
-      moves replaced by those of $P(y - \\rho R(y))$, so constrained components lie exactly
-      in their sets (differentiable through the implicit function theorem).
+      moves (or where $y$ itself lies outside the set) replaced by those of
+      $P(y - \\rho R(y))$, so constrained components lie exactly in their sets, converged
+      or not (differentiable through the implicit function theorem).
     - `iterations`: number of outer iterations taken.
     - `residual_norm`: $\\|G(y)\\|_\\infty$ at the returned value, with
       $G(y) = y - P(y - \\rho R(y))$ at the problem's own $\\rho$.
@@ -135,12 +136,16 @@ class AbstractNonlinearSolver(eqx.Module):
         y, (iterations, history) = lax.custom_root(G, y0, _solve, _tangent_solve, has_aux=True)
         # On components the projector moves, return the projected point P(y - rho R(y)):
         # it lies exactly in the set (the iterate only to tolerance), within |G(y)| of y,
-        # with the same implicit derivative (G vanishes along the solution). Free
-        # components keep the iterate, which satisfies its own equations more exactly.
+        # with the same implicit derivative (G vanishes along the solution). So do
+        # components where the iterate itself lies outside the set (P(y) != y), which
+        # happens when the solve stopped unconverged with z inside the set. Free
+        # components, and constrained ones whose iterate is in its set, keep the iterate,
+        # which satisfies its own equations more exactly.
         z = y - rho * residual(y)
         p = project(z, y, rho)
         G_y = y - p
-        value = jnp.where(lax.stop_gradient(p != z), p, y)
+        outside = project(y, y, rho) != y
+        value = jnp.where(lax.stop_gradient((p != z) | outside), p, y)
         y_nd = lax.stop_gradient(y)
         G_final = lax.stop_gradient(G_y)
         norm = jnp.max(jnp.abs(G_final), initial=0.0)

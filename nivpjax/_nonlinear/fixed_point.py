@@ -29,7 +29,10 @@ class FixedPointVI(AbstractNonlinearSolver):
     the metric $\operatorname{diag}(\rho)^{-1}$, where the stage residual is monotone.
 
     Stopping test: the natural residual $|\bar y - y| / \min(1, \alpha) \ge |G(y)|$ at $y$;
-    the returned value is that $y$ and the reported residual is $|G(y)|$ recomputed.
+    the returned value is then the full projection step $\bar y$ if $\alpha = 1$ and it
+    contracts (as in move 1), else $y$, and the reported residual is $|G|$ recomputed
+    there. The full step solves rows that are explicit given the others exactly (positions
+    $q = q_0 + h v$); it is not taken on saddle stages ($\alpha < 1$), where it cycles.
 
     **Arguments:**
 
@@ -83,7 +86,14 @@ class FixedPointVI(AbstractNonlinearSolver):
             extra = ~plain & finite & (L <= self.nu)
             y_extra = project(y - alpha * rho * R_bar, y_bar, alpha * rho)
             accept = plain | extra
-            y_new = jnp.where(done, y, jnp.where(plain, y_bar, jnp.where(extra, y_extra, y)))
+            # On convergence, end with the projection step if it contracts: it is free (the
+            # predictor is computed) and solves rows that are explicit given the others
+            # exactly (positions q = q0 + h v), which would otherwise keep an error of the
+            # tolerance's size (e.g. 1e-10 of position per step: enough to sustain
+            # micro-bounces of a ball at rest).
+            moved = jnp.where(plain, y_bar, jnp.where(extra, y_extra, y))
+            better = plain & (alpha >= 1.0) & (wnorm(z - y_bar, 1 / rho) <= self.kappa * den)
+            y_new = jnp.where(done, jnp.where(better, y_bar, y), moved)
             shrink = 0.9 * jnp.maximum(self.shrink, self.nu / jnp.where(L > 0, L, 1.0))
             shrink = jnp.where(finite, shrink, self.shrink)
             grown = jnp.minimum(alpha * self.grow, self.alpha_max)

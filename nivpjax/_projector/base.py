@@ -26,6 +26,8 @@ class ProjectionContext(eqx.Module):
     - `args`: the user's parameters.
     - `block`: inside a [`nivpjax.BlockProjector`][], the indices of the block being
       projected (`None` outside one); `restrict` maps a full-state vector to the block.
+    - `rate`: the vector field $f(t, y_{\text{iter}})$ at the end of a step, full state;
+      set only when a step's `violation` is checked (`None` inside a stage).
     """
 
     t: Float[Array, ""]
@@ -35,6 +37,7 @@ class ProjectionContext(eqx.Module):
     rho: Float[Array, " m"]
     args: PyTree[Any]
     block: tuple[int, ...] | None = eqx.field(static=True, default=None)
+    rate: Float[Array, " n"] | None = None
 
     def restrict(self, v):
         """The components of a full-state vector `v` that belong to this block."""
@@ -81,6 +84,13 @@ class AbstractProjector(eqx.Module):
         (e.g. the penetration of a contact crossed inside the step). Controllers treat it as
         a local error, which locates such events. Default: 0 (sets enforced throughout)."""
         return jnp.zeros((), ctx.y_iter.dtype)
+
+    def initial_violation(self, ctx: ProjectionContext) -> Float[Array, ""]:
+        """How far the initial state `ctx.y_prev` violates a constraint that no stage can
+        restore (e.g. a contact that starts penetrated: velocity-level contact keeps the
+        penetration). The solve reports `initial_state_infeasible` when it exceeds
+        round-off. Default: 0 (constraints enforced by the first stage)."""
+        return jnp.zeros((), ctx.y_prev.dtype)
 
     def impulsive(self, ctx: ProjectionContext) -> Bool[Array, ""]:
         """Whether the stage from `ctx.y_prev` to `ctx.y_iter` contained an impulse (a jump

@@ -84,12 +84,20 @@ class BlockProjector(AbstractProjector):
             rho=rho,
             args=ctx.args,
             block=indices,
+            rate=ctx.rate,
         )
 
     def violation(self, ctx: ProjectionContext):
         out = jnp.zeros((), ctx.y_iter.dtype)
         for indices, projector in self.blocks:
             out = jnp.maximum(out, projector.violation(self._sub(ctx, indices, ctx.y_iter.shape)))
+        return out
+
+    def initial_violation(self, ctx: ProjectionContext):
+        out = jnp.zeros((), ctx.y_prev.dtype)
+        for indices, projector in self.blocks:
+            sub = self._sub(ctx, indices, ctx.y_iter.shape)
+            out = jnp.maximum(out, projector.initial_violation(sub))
         return out
 
     def impulsive(self, ctx: ProjectionContext):

@@ -27,7 +27,9 @@ class UnilateralContact(AbstractProjector):
     and `restitution` $e$ (scalar or per contact, array or callable).
 
     A contact is active in a stage when it is closed at the stage's start,
-    $g(y_{\text{prev}}) \le 0$, and not separating faster than round-off, or its predicted
+    $g(y_{\text{prev}}) \le \max(16\,\varepsilon\,(1 + \|y_{\text{prev}}\|_\infty),\,
+    h\,\sqrt{\varepsilon}\,(1 + \|u^-\|_\infty))$ (zero up to round-off, or closed within
+    the step at a round-off velocity), and not separating faster than round-off, or its predicted
     gap
     $g(y_{\text{prev}}) + \text{lookahead}\cdot h\,u(y_{\text{prev}})$ is $\le 0$ (the default
     lookahead $1/2$ is Moreau's midpoint rule; the active set is frozen within a stage so the
@@ -73,19 +75,46 @@ class UnilateralContact(AbstractProjector):
         # A contact is active when the gap predicted over the lookahead closes, and a closed
         # contact stays active unless it separates faster than round-off (a resting contact
         # carries velocities of order eps from the previous LCP).
-        eps = jnp.finfo(dtype).eps
-        roundoff = jnp.sqrt(eps) * (1.0 + jnp.max(jnp.abs(u_minus), initial=0.0))
         predicted = gap0 + self.lookahead * ctx.h * u_minus <= 0
-        active = predicted | ((gap0 <= 0) & (u_minus <= roundoff))
+        active = predicted | self._resting(gap0, u_minus, y0, ctx.h)
         return Wt, B, gap0, u_minus, active
+
+    @staticmethod
+    def _closed(gap0, u_minus, y0, h):
+        # Closed up to round-off: the round-off of a gap computed from positions of the
+        # state's size, or the distance a round-off velocity covers in the step. A resting
+        # body whose gap drifted above zero by the trapezoidal rule's rounding (~1e-17) or
+        # by an iterative solver's tolerance (the VI method's 1e-10) stays in contact
+        # instead of falling for a step and micro-bouncing.
+        eps = jnp.finfo(gap0.dtype).eps
+        scale = 1.0 + jnp.max(jnp.abs(y0), initial=0.0)
+        roundoff_velocity = jnp.sqrt(eps) * (1.0 + jnp.max(jnp.abs(u_minus), initial=0.0))
+        return gap0 <= jnp.maximum(16 * eps * scale, h * roundoff_velocity)
+
+    @classmethod
+    def _resting(cls, gap0, u_minus, y0, h):
+        eps = jnp.finfo(gap0.dtype).eps
+        roundoff_velocity = jnp.sqrt(eps) * (1.0 + jnp.max(jnp.abs(u_minus), initial=0.0))
+        return cls._closed(gap0, u_minus, y0, h) & (u_minus <= roundoff_velocity)
 
     def violation(self, ctx: ProjectionContext):
         """Penetration at the end of the step of contacts that were open at its start (not
         enforced, or only activated by the lookahead inside the step)."""
         dtype = ctx.y_iter.dtype
-        _, _, gap0, _, _ = self._start(ctx, dtype)
+        _, _, gap0, u_minus, _ = self._start(ctx, dtype)
         gap1 = jnp.atleast_1d(jnp.asarray(self.gap(ctx.t, ctx.y_iter, ctx.args), dtype))
-        return jnp.max(jnp.where(gap0 > 0, jnp.maximum(-gap1, 0.0), 0.0), initial=0.0)
+        is_open = ~self._closed(gap0, u_minus, ctx.y_prev, ctx.h)
+        return jnp.max(jnp.where(is_open, jnp.maximum(-gap1, 0.0), 0.0), initial=0.0)
+
+    def initial_violation(self, ctx: ProjectionContext):
+        """Initial penetration beyond round-off ($\\sqrt\\varepsilon$ relative to the state):
+        a velocity-level contact cannot push a body out, so the run would stay inside."""
+        y0 = ctx.y_prev
+        dtype = y0.dtype
+        gap0 = jnp.atleast_1d(jnp.asarray(self.gap(ctx.t, y0, ctx.args), dtype))
+        tol = jnp.sqrt(jnp.finfo(dtype).eps) * (1.0 + jnp.max(jnp.abs(y0), initial=0.0))
+        depth = jnp.max(jnp.maximum(-gap0, 0.0), initial=0.0)
+        return jnp.where(depth > tol, depth, 0.0)
 
     def impulsive(self, ctx: ProjectionContext):
         """An active contact approaching at the start of the stage is an impact (velocities

@@ -40,16 +40,40 @@ class CoulombFriction(AbstractProjector):
     isotropic: bool = eqx.field(static=True, default=False)
 
     def violation(self, ctx: ProjectionContext):
-        """A slip reversal inside the step (the sliding velocity changes sign between its
-        ends): the smaller of the two speeds, so the step is shortened until the reversal
-        lies within tolerance of a step boundary (Richardson extrapolation cannot see it)."""
+        r"""Two events inside a step, each measured in velocity units so the step is
+        shortened until the event lies within tolerance of a step boundary:
+
+        - a slip reversal (the sliding velocity changes sign between the ends): the smaller
+          of the two speeds (Richardson extrapolation cannot see it);
+        - a missed breakaway: the step ends stuck ($v_1 = 0$ up to round-off) although the
+          applied force there, $F = f(t_1, y_1)$ (`ctx.rate`), exceeds the bound: the
+          velocity $h\,(|F| - c)$ the body would gain in one step. Backward Euler checks
+          the stick at the end point and never reports it; the trapezoidal rule and Bathe's
+          scheme check an average of the force over the step and would let a load that
+          grows during a long stick step past the static bound.
+        """
+        dtype = ctx.y_iter.dtype
         v0, v1 = ctx.restrict(ctx.y_prev), ctx.restrict(ctx.y_iter)
+        stuck_tol = 64 * jnp.finfo(dtype).eps * (1.0 + jnp.max(jnp.abs(v0), initial=0.0))
         if self.isotropic:
             reversal = jnp.dot(v0, v1) < 0
             size = jnp.minimum(jnp.linalg.norm(v0), jnp.linalg.norm(v1))
-            return jnp.where(reversal, size, 0.0)
-        size = jnp.minimum(jnp.abs(v0), jnp.abs(v1))
-        return jnp.max(jnp.where(v0 * v1 < 0, size, 0.0), initial=0.0)
+            out = jnp.where(reversal, size, 0.0)
+            stuck = jnp.linalg.norm(v1) <= stuck_tol
+        else:
+            size = jnp.minimum(jnp.abs(v0), jnp.abs(v1))
+            out = jnp.max(jnp.where(v0 * v1 < 0, size, 0.0), initial=0.0)
+            stuck = jnp.abs(v1) <= stuck_tol
+        if ctx.rate is None:
+            return out
+        force = ctx.restrict(ctx.rate)
+        c = jnp.broadcast_to(jnp.maximum(resolve(self.bound, ctx, dtype), 0.0), v1.shape)
+        if self.isotropic:
+            excess = jnp.linalg.norm(force) - c.reshape(-1)[0]
+        else:
+            excess = jnp.abs(force) - c
+        missed = jnp.max(jnp.where(stuck, ctx.h * jnp.maximum(excess, 0.0), 0.0), initial=0.0)
+        return jnp.maximum(out, missed)
 
     def __call__(self, z, ctx: ProjectionContext):
         z = jnp.asarray(z)

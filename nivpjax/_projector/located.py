@@ -31,6 +31,9 @@ class EventLocated(AbstractProjector):
     def __call__(self, z, ctx: ProjectionContext):
         return self.projector(z, ctx)
 
+    def initial_violation(self, ctx: ProjectionContext):
+        return self.projector.initial_violation(ctx)
+
     def impulsive(self, ctx: ProjectionContext):
         return self.projector.impulsive(ctx)
 
