@@ -5,6 +5,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._custom_types import plain_int
 from .._norms import scaled_rms_norm
 from .._results import RESULTS
 from .base import AbstractController, StepInfo
@@ -55,7 +56,7 @@ class PIDController(AbstractController):
     h_max: float | None = None
     error_mask: jax.Array | None = None
     nonlinear_factor: float = 0.25
-    error_order: int | None = eqx.field(static=True, default=None)
+    error_order: int | None = eqx.field(static=True, default=None, converter=plain_int)
 
     def __check_init__(self):
         for name in ("rtol", "atol", "safety"):
@@ -70,7 +71,13 @@ class PIDController(AbstractController):
                 raise ValueError(f"`{name}` must be positive and finite, got {value}.")
         for name in ("h_min", "h_max"):
             value = getattr(self, name)
-            if value is not None and not np.isfinite(value):
+            if value is None or isinstance(value, jax.core.Tracer):
+                continue
+            if isinstance(value, (str, bytes, bool)) or not np.issubdtype(
+                np.asarray(value).dtype, np.number
+            ):
+                raise TypeError(f"`{name}` must be a real number, got {value!r}.")
+            if not np.isfinite(value):
                 raise ValueError(f"`{name}` must be finite, got {value}.")
         if self.h_min is not None and self.h_max is not None and self.h_min > self.h_max:
             raise ValueError(

@@ -8,6 +8,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import lineax as lx
+import numpy as np
 from jax import lax
 from jaxtyping import Array, Float, Int
 
@@ -105,7 +106,10 @@ class AbstractNonlinearSolver(eqx.Module):
             value = getattr(self, name)
             if isinstance(value, jax.core.Tracer):
                 continue
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
+            real = isinstance(value, (int, float, np.floating, np.integer)) and not isinstance(
+                value, (bool, np.bool_)
+            )
+            if not (real and math.isfinite(value) and value >= 0):
                 raise ValueError(f"`{name}` must be finite and non-negative, got {value!r}.")
 
     @abc.abstractmethod

@@ -5,6 +5,7 @@ import equinox as eqx
 import jax.numpy as jnp
 from jax import lax
 
+from .._custom_types import plain_int
 from .base import AbstractNonlinearSolver, init_history, scaled_error
 
 
@@ -44,7 +45,7 @@ class FixedPointVI(AbstractNonlinearSolver):
 
     rtol: float = 1e-8
     atol: float = 1e-10
-    max_steps: int = eqx.field(static=True, default=500)
+    max_steps: int = eqx.field(static=True, default=500, converter=plain_int)
     alpha0: float = 1.0
     alpha_max: float = 1.0
     nu: float = 0.9

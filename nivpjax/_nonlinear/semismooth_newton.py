@@ -5,6 +5,7 @@ import jax
 import jax.numpy as jnp
 from jax import lax
 
+from .._custom_types import plain_int
 from .base import AbstractNonlinearSolver, dense_solve, init_history, natural_map, scaled_error
 
 
@@ -34,7 +35,7 @@ class SemismoothNewton(AbstractNonlinearSolver):
 
     rtol: float = 1e-8
     atol: float = 1e-10
-    max_steps: int = eqx.field(static=True, default=50)
+    max_steps: int = eqx.field(static=True, default=50, converter=plain_int)
     full_steps: int = eqx.field(static=True, default=3)
     sigma: float = 1e-4
     beta: float = 0.5

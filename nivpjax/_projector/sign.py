@@ -5,6 +5,15 @@ from .base import AbstractProjector, ProjectionContext
 from .box import sign_resolvent_interval
 
 
+def _indices(index):
+    out = []
+    for i in np.atleast_1d(index).tolist():
+        if isinstance(i, bool) or not isinstance(i, int):
+            raise TypeError(f"`s_index`/`w_index` indices must be integers, got {i!r}.")
+        out.append(i)
+    return tuple(out)
+
+
 class SignResolvent(AbstractProjector):
     r"""The relay/sign relation $w \in \operatorname{sign}(s)$ on a pair of state components,
     through its resolvent
@@ -34,8 +43,7 @@ class SignResolvent(AbstractProjector):
     tau: float | None = None
 
     def __init__(self, s_index, w_index, tau: float | None = None):
-        s = tuple(int(i) for i in np.atleast_1d(s_index))
-        w = tuple(int(i) for i in np.atleast_1d(w_index))
+        s, w = _indices(s_index), _indices(w_index)
         if len(s) != len(w):
             raise ValueError(
                 f"`s_index` and `w_index` must have the same length, got {len(s)} and {len(w)}."

@@ -173,6 +173,8 @@ def _controller(adaptive, aopts, atol, rtol, h0, n, skip, component_slices, alge
         _slices_to_indices(component_slices, n) if component_slices else [[i] for i in range(n)]
     )
     for b in skipped:
+        if isinstance(b, (bool, np.bool_)) or not isinstance(b, (int, np.integer)):
+            raise ValueError(f"`skip_error_indices` entry {b!r} must be an integer index.")
         if not 0 <= int(b) < len(blocks):
             raise ValueError(
                 f"`skip_error_indices` entry {b} is out of range: there are {len(blocks)} "
