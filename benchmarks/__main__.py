@@ -36,6 +36,18 @@ def main(argv=None):
         help="work-precision scenes",
     )
     parser.add_argument("--skip-batched", action="store_true")
+    parser.add_argument(
+        "--batch-sizes",
+        nargs="+",
+        type=int,
+        help="batch sizes of the sweeps (default: 1 10 100 1000, and 10000 without --quick)",
+    )
+    parser.add_argument(
+        "--batch-scenes",
+        nargs="+",
+        choices=list(batched.SWEEPS),
+        help="scenes of the batched sweeps (default: ball, and slider without --quick)",
+    )
     parser.add_argument("--skip-gradients", action="store_true")
     args = parser.parse_args(argv)
 
@@ -46,9 +58,8 @@ def main(argv=None):
     wp = [work_precision.run_scene(name, args.quick, log) for name in args.scenes]
     sweeps = []
     if not args.skip_batched:
-        sweeps = [
-            batched.run_sweep(n, args.quick, log) for n in batched.settings(args.quick)["scenes"]
-        ]
+        cfg = batched.settings(args.quick, args.batch_sizes, args.batch_scenes)
+        sweeps = [batched.run_sweep(n, cfg, log) for n in cfg["scenes"]]
     grads = []
     if not args.skip_gradients:
         grads = [gradients.run_problem(n, args.quick, log) for n in gradients.PROBLEMS]

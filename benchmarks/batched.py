@@ -64,10 +64,23 @@ SWEEPS = {
 }
 
 
-def settings(quick):
+def settings(quick, sizes=None, scenes=None):
     if quick:
-        return dict(scenes=("ball",), sizes=(1, 10, 100, 1000), ref_subset=2)
-    return dict(scenes=("ball", "slider"), sizes=(1, 10, 100, 1000, 10000), ref_subset=5)
+        cfg = dict(scenes=("ball",), sizes=(1, 10, 100, 1000), ref_subset=2, chunk_repeats=2)
+    else:
+        cfg = dict(
+            scenes=("ball", "slider"),
+            sizes=(1, 10, 100, 1000, 10000),
+            ref_subset=5,
+            chunk_repeats=3,
+        )
+    if sizes:
+        if any(n < 1 for n in sizes):
+            raise ValueError(f"batch sizes must be positive, got {sizes}")
+        cfg["sizes"] = tuple(sorted(set(sizes)))
+    if scenes:
+        cfg["scenes"] = tuple(scenes)
+    return cfg
 
 
 def _maxrss_mb():
@@ -118,8 +131,7 @@ def _waste(attempts):
     return float(np.sum(top - attempts) / (attempts.size * top)) if top > 0 else 0.0
 
 
-def run_sweep(name, quick, log):
-    cfg = settings(quick)
+def run_sweep(name, cfg, log):
     sweep = SWEEPS[name]
     case = CASES[sweep["case"]]
     batched = _batched_solver(sweep, case)
@@ -195,7 +207,7 @@ def run_sweep(name, quick, log):
         ):
             chunks = [jnp.asarray(all_params[order[i : i + CHUNK]]) for i in range(0, n_big, CHUNK)]
             run_all = lambda chunks=chunks: [block(exe(c)) for c in chunks]
-            t_run, outs = median_time(run_all, repeats=2 if quick else 3)
+            t_run, outs = median_time(run_all, repeats=cfg["chunk_repeats"])
             idle = sum(
                 np.sum(np.max(np.asarray(o[1] + o[2])) - np.asarray(o[1] + o[2])) for o in outs
             )

@@ -406,6 +406,7 @@ def gradient_table(grads):
             [
                 g["scene"],
                 g["param"],
+                "-" if g.get("h_max") is None else f"{g['h_max']:g}",
                 fmt_time(g["fwd_compile"]),
                 fmt_time(g["vg_compile"]),
                 fmt_time(g["fwd"]),
@@ -422,6 +423,7 @@ def gradient_table(grads):
         [
             "scene",
             "parameter",
+            "h_max",
             "compile forward",
             "compile value_and_grad",
             "forward",
@@ -462,7 +464,7 @@ def targets_table(wp, batched, grads, quick):
         cells.append(f"{b['sweep']['case']} N={big['n']}: {_ratio(ratio)}")
         if big["n"] < BATCH_TARGET_N:
             verdict = "NOT MEASURED" if verdict == "MET" else verdict
-            why.append(f"{b['sweep']['case']}: quick mode stops at N={big['n']}")
+            why.append(f"{b['sweep']['case']}: the run stopped at N={big['n']}")
         elif ratio < BATCH_TARGET:
             verdict = "MISSED"
             unb = next(r for r in b["rows"] if r["n"] == 1)
@@ -516,18 +518,21 @@ def targets_table(wp, batched, grads, quick):
 
 
 # --- documents -------------------------------------------------------------------------------
-def _methodology(quick):
+def _methodology(quick, batched):
+    sizes = sorted({r["n"] for b in batched for r in b["rows"]})
+    scenes = " and ".join(b["sweep"]["case"] for b in batched) or "no scene"
+    batches = f"batches of {', '.join(map(str, sizes))} on {scenes}" if batched else "no batches"
     if quick:
         nj_set, other_set = "1e-3 ... 1e-7, one per decade", "1e-3, 1e-5"
         mode = (
             "--quick (2 tolerances, 2 nivpjax configurations (Bathe x SSN/VI), 2 "
-            "regularisation strengths, batches up to 1000 on the ball only, 3 repeats)"
+            f"regularisation strengths, {batches}, 3 repeats)"
         )
     else:
         nj_set, other_set = "1e-2 ... 1e-8, two per decade", "1e-2 ... 1e-7, one per decade"
         mode = (
             "full (6 tolerances, 4 steppers x 2 solvers, 3 regularisation strengths, "
-            "batches up to 10000 on ball and slider, 7 repeats)"
+            f"{batches}, 7 repeats)"
         )
     return f"""\
 - Work-precision: every method on each scene at rtol in the sweep, atol = 1e-3 rtol. nivpjax
@@ -591,7 +596,7 @@ def write_documents(wp, batched, grads, meta, quick):
         "",
         "## How it is measured",
         "",
-        _methodology(quick),
+        _methodology(quick, batched),
     ]
     for res in wp:
         case = res["case"]

@@ -4,6 +4,7 @@ from collections.abc import Callable
 from typing import Any
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float
 
@@ -41,15 +42,56 @@ class Model(eqx.Module):
     def mass_times(self, v):
         return v if self.mass_matrix is None else self.mass_matrix @ v
 
-    def solve_stage(self, solver, t_end, h_eff, y_base, f_explicit, theta, y_prev, guess, args):
+    def _rate(self, t, y, args):
+        """$y'$ on differential rows (zero on algebraic rows): $A_{dd}^{-1} f_d$."""
+        f = jnp.where(self.algebraic, 0.0, self.f(t, y, args))
+        if self.mass_matrix is None:
+            return f
+        A = self.mass_matrix + jnp.diag(self.algebraic.astype(y.dtype))
+        return jnp.linalg.solve(A, f)
+
+    def solve_stage(
+        self,
+        solver,
+        t_end,
+        h_eff,
+        y_base,
+        f_explicit,
+        theta,
+        y_prev,
+        guess,
+        args,
+        event_sensitivity=True,
+    ):
         r"""Solve one one-leg stage: find $y$ with, on differential rows,
         $A(y - y_b)/h_e = \theta f(t_e, y) + (1-\theta) f_x$ ($y_b$ = `y_base`,
         $h_e$ = `h_eff`, $t_e$ = `t_end`, $f_x$ = `f_explicit`), on algebraic rows
         $0 = f(t_e, y)$, subject to the projector.
 
+        Event sensitivity (`event_sensitivity`): a stage containing an event the projector
+        reports (`event_time`: an impact) applies it as if the flow met the contact at the
+        stage start, with the stage's times fixed, so plain derivatives miss how the event
+        time $\tau$ moves with the state and parameters (the saltation term
+        $(D R\, f^- - f^+)\,d\tau$, $R$ the impact map). With
+        $\delta = \tau - \text{stop\_gradient}(\tau)$, zero in value so the solution is
+        unchanged, the stage start moves along the pre-event flow by $\delta$ (the stage's
+        impact map then contributes $D R\, f^- \delta$) and the stage result moves back
+        along the post-event flow by $\delta$ ($-f^+ \delta$).
+
         Returns the nonlinear solution and the stage residual at the solution (the
         constraint reaction per unit time: forces, contact impulses divided by $h$)."""
         alg = self.algebraic
+        delta = None
+        if event_sensitivity and self.projector.has_event_time:
+            rho0 = jnp.full_like(y_prev, h_eff)
+            ctx0 = ProjectionContext(
+                t=t_end, h=h_eff, y_prev=y_prev, y_iter=y_prev, rho=rho0, args=args
+            )
+            tau, found = self.projector.event_time(ctx0)
+            delta = jnp.where(found, tau - jax.lax.stop_gradient(tau), 0.0)
+            rate0 = self._rate(t_end - h_eff, y_prev, args)
+            y_base = y_base + rate0 * delta
+            y_prev = y_prev + rate0 * delta
 
         def residual(y):
             fy = self.f(t_end, y, args)
@@ -70,14 +112,20 @@ class Model(eqx.Module):
             return self.projector(z, ctx)
 
         sol = solver.solve(residual, project, rho, guess)
-        return sol, residual(sol.value)
+        multipliers = residual(sol.value)
+        if delta is not None:
+            value = sol.value - self._rate(t_end, sol.value, args) * delta
+            sol = eqx.tree_at(lambda s: s.value, sol, value)
+        return sol, multipliers
 
     def consistent_initial_state(self, solver, t0, h, y0, args):
         r"""Solve the algebraic rows and the projection at $t_0$ with the differential
         states held fixed (a stage with $\theta = 0$): multipliers get their consistent
         values (a relay selection, a diode current) before the first step uses them, and an
         initial state outside the admissible set is projected onto it."""
-        return self.solve_stage(solver, t0, h, y0, None, 0.0, y0, y0, args)[0]
+        return self.solve_stage(
+            solver, t0, h, y0, None, 0.0, y0, y0, args, event_sensitivity=False
+        )[0]
 
     def _context(self, t, h, y0, y1, args):
         rho = jnp.full_like(y1, h)

@@ -128,6 +128,7 @@ def solve(
     equation_rows=None,
     save_attempts: bool = False,
     adjoint: Literal["checkpointed", "forward"] = "checkpointed",
+    checkpoints: int | None = None,
     progress: bool = False,
     throw: bool = True,
 ) -> Solution:
@@ -163,6 +164,18 @@ def solve(
     - `save_attempts`: record every attempted step in `Solution.attempts`.
     - `adjoint`: `"checkpointed"` (default) supports reverse-mode differentiation;
       `"forward"` uses a plain `lax.while_loop` (forward mode only, a little faster).
+    - `checkpoints`: with `adjoint="checkpointed"`, how many loop states reverse mode may
+      store (`None` or a positive int). `None` (default) lets equinox choose
+      $O(\sqrt{\text{max\_steps}})$ (90 for `max_steps=4096`); a run that attempts more
+      steps than there are checkpoints recomputes steps from the stored ones (online
+      Stumm–Walther checkpointing). A value of at least
+      `max_steps` (larger values are clipped to it) stores every attempted step: nothing is
+      recomputed and equinox skips the checkpoint schedule, typically the fastest reverse
+      mode (`benchmarks/gradients.py`: value_and_grad 2.6–3.1x the forward solve instead
+      of 4.6–5.6x), for `max_steps` copies of the loop state (time, step sizes, state
+      vector, controller state; not the output buffers), allocated up front (per batch
+      member under `vmap`). Values and gradients do not depend on it (up to round-off);
+      only the cost of reverse mode does.
     - `progress`: print a progress bar to stderr.
     - `throw`: raise [`nivpjax.SolveError`][] if the run failed (`max_steps` reached, step
       size below `h_min`, repeated nonlinear failures). With `False` the failure is only in
@@ -209,7 +222,23 @@ def solve(
         )
     if adjoint not in _ADJOINTS:
         raise ValueError(f"`adjoint` must be 'checkpointed' or 'forward', got {adjoint!r}.")
-    if isinstance(tau, (str, bytes)) or not np.issubdtype(np.asarray(tau).dtype, np.number):
+    if checkpoints is not None:
+        if not isinstance(checkpoints, (int, np.integer)) or isinstance(
+            checkpoints, (bool, np.bool_)
+        ):
+            raise TypeError(f"`checkpoints` must be a positive int or None, got {checkpoints!r}.")
+        if checkpoints < 1:
+            raise ValueError(f"`checkpoints` must be a positive int or None, got {checkpoints!r}.")
+        if adjoint != "checkpointed":
+            raise ValueError(
+                f"`checkpoints` only applies to adjoint='checkpointed', got adjoint={adjoint!r}."
+            )
+        checkpoints = min(int(checkpoints), max_steps)
+    if (
+        isinstance(tau, (str, bytes))
+        or not np.issubdtype(np.asarray(tau).dtype, np.number)
+        or np.iscomplexobj(tau)
+    ):
         raise TypeError(f"`tau` must be a positive number or array, got {tau!r}.")
     tau_arr = np.asarray(tau, dtype=float)
     if tau_arr.shape not in ((), (n,)) or not np.all(np.isfinite(tau_arr) & (tau_arr > 0)):
@@ -261,6 +290,12 @@ def solve(
                 f"`error_mask` must be a boolean array of shape ({n},), got {error_mask.shape}."
             )
     if t_eval is not None:
+        if not _is_traced(t_eval) and (
+            isinstance(t_eval, (str, bytes))
+            or not np.issubdtype(np.asarray(t_eval).dtype, np.number)
+            or np.iscomplexobj(t_eval)
+        ):
+            raise TypeError(f"`t_eval` must be an array of real times, got {t_eval!r}.")
         t_eval = jnp.atleast_1d(jnp.asarray(t_eval, dtype))
         if t_eval.ndim != 1:
             raise ValueError(f"`t_eval` must be 1-D, got shape {t_eval.shape}.")
@@ -300,6 +335,7 @@ def solve(
         max_steps,
         save_attempts,
         _ADJOINTS[adjoint],
+        checkpoints,
         progress,
         throw and traced,
     )
@@ -323,6 +359,7 @@ def _solve_jit(
     max_steps,
     save_attempts,
     kind,
+    checkpoints,
     progress,
     throw_inside,
 ):
@@ -343,6 +380,7 @@ def _solve_jit(
         save_attempts,
         kind,
         meter,
+        checkpoints,
     )
     if t_eval is not None:
         sol = eqx.tree_at(

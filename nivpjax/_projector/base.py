@@ -92,6 +92,21 @@ class AbstractProjector(eqx.Module):
         round-off. Default: 0 (constraints enforced by the first stage)."""
         return jnp.zeros((), ctx.y_prev.dtype)
 
+    @property
+    def has_event_time(self) -> bool:
+        """Whether `event_time` can report an event (static: a model without one skips the
+        event-sensitivity work of each stage)."""
+        return False
+
+    def event_time(self, ctx: ProjectionContext) -> tuple[Float[Array, ""], Bool[Array, ""]]:
+        """`(tau, found)` for a stage starting at `ctx.y_prev`: whether the stage applies an
+        event (an impact) at a fixed point of the stage although the flow reaches it
+        `tau` later than the stage start, `tau` differentiable in `ctx.y_prev` and
+        `ctx.args`. The stage uses it only for derivatives (the saltation term: how the
+        event time moves with the state and parameters); values are unaffected. Default:
+        no event."""
+        return jnp.zeros((), ctx.y_prev.dtype), jnp.zeros((), bool)
+
     def impulsive(self, ctx: ProjectionContext) -> Bool[Array, ""]:
         """Whether the stage from `ctx.y_prev` to `ctx.y_iter` contained an impulse (a jump
         of the state, e.g. an impact). Multistep stages (Bathe's backward difference) must

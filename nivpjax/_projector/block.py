@@ -100,6 +100,21 @@ class BlockProjector(AbstractProjector):
             out = jnp.maximum(out, projector.initial_violation(sub))
         return out
 
+    @property
+    def has_event_time(self) -> bool:
+        return any(projector.has_event_time for _, projector in self.blocks)
+
+    def event_time(self, ctx: ProjectionContext):
+        """The earliest event of the blocks."""
+        tau = jnp.full((), jnp.inf, ctx.y_prev.dtype)
+        found = jnp.zeros((), bool)
+        for indices, projector in self.blocks:
+            tau_b, found_b = projector.event_time(self._sub(ctx, indices, ctx.y_iter.shape))
+            first = found_b & (~found | (tau_b < tau))
+            tau = jnp.where(first, tau_b, tau)
+            found = found | found_b
+        return jnp.where(found, tau, 0.0), found
+
     def impulsive(self, ctx: ProjectionContext):
         out = jnp.zeros((), bool)
         for indices, projector in self.blocks:

@@ -116,6 +116,24 @@ class UnilateralContact(AbstractProjector):
         depth = jnp.max(jnp.maximum(-gap0, 0.0), initial=0.0)
         return jnp.where(depth > tol, depth, 0.0)
 
+    @property
+    def has_event_time(self) -> bool:
+        return True
+
+    def event_time(self, ctx: ProjectionContext):
+        r"""An impact in this stage (an active contact approaching faster than round-off):
+        the stage applies it from the pre-impact velocity at its start, while the flow
+        meets the contact $\tau = -g(y_{\text{prev}})/u^-$ later ($\tau < 0$ when the
+        located step ended slightly penetrated). With several impacts, the earliest."""
+        dtype = ctx.y_prev.dtype
+        _, _, gap0, u_minus, active = self._start(ctx, dtype)
+        eps = jnp.finfo(dtype).eps
+        threshold = jnp.sqrt(eps) * (1.0 + jnp.max(jnp.abs(u_minus), initial=0.0))
+        impact = active & (u_minus < -threshold)
+        tau = jnp.where(impact, -gap0 / jnp.where(impact, u_minus, -1.0), jnp.inf)
+        found = jnp.any(impact)
+        return jnp.where(found, jnp.min(tau), 0.0), found
+
     def impulsive(self, ctx: ProjectionContext):
         """An active contact approaching at the start of the stage is an impact (velocities
         below a round-off threshold, as a resting contact carries, are not)."""

@@ -37,6 +37,13 @@ class EventLocated(AbstractProjector):
     def impulsive(self, ctx: ProjectionContext):
         return self.projector.impulsive(ctx)
 
+    @property
+    def has_event_time(self) -> bool:
+        return self.projector.has_event_time
+
+    def event_time(self, ctx: ProjectionContext):
+        return self.projector.event_time(ctx)
+
     def violation(self, ctx: ProjectionContext):
         s0 = jnp.atleast_1d(self.surface(ctx.t - ctx.h, ctx.y_prev, ctx.args))
         s1 = jnp.atleast_1d(self.surface(ctx.t, ctx.y_iter, ctx.args))
