@@ -83,10 +83,7 @@ class Model(eqx.Module):
         alg = self.algebraic
         delta = None
         if event_sensitivity and self.projector.has_event_time:
-            rho0 = jnp.full_like(y_prev, h_eff)
-            ctx0 = ProjectionContext(
-                t=t_end, h=h_eff, y_prev=y_prev, y_iter=y_prev, rho=rho0, args=args
-            )
+            ctx0 = self._context(t_end, h_eff, y_prev, y_prev, args)
             tau, found = self.projector.event_time(ctx0)
             delta = jnp.where(found, tau - jax.lax.stop_gradient(tau), 0.0)
             rate0 = self._rate(t_end - h_eff, y_prev, args)
@@ -127,16 +124,14 @@ class Model(eqx.Module):
             solver, t0, h, y0, None, 0.0, y0, y0, args, event_sensitivity=False
         )[0]
 
-    def _context(self, t, h, y0, y1, args):
+    def _context(self, t, h, y0, y1, args, rate=None):
         rho = jnp.full_like(y1, h)
-        return ProjectionContext(t=t, h=h, y_prev=y0, y_iter=y1, rho=rho, args=args)
+        return ProjectionContext(t=t, h=h, y_prev=y0, y_iter=y1, rho=rho, args=args, rate=rate)
 
     def violation(self, t1, h, y0, y1, args):
         """Constraint violation at the end of a step (see `AbstractProjector.violation`).
         The context carries the vector field at the end point (`rate`)."""
-        rho = jnp.full_like(y1, h)
-        rate = self.f(t1, y1, args)
-        ctx = ProjectionContext(t=t1, h=h, y_prev=y0, y_iter=y1, rho=rho, args=args, rate=rate)
+        ctx = self._context(t1, h, y0, y1, args, rate=self.f(t1, y1, args))
         return self.projector.violation(ctx)
 
     def initial_violation(self, t0, h, y0, args):

@@ -93,8 +93,7 @@ class FixedPointVI(AbstractNonlinearSolver):
             # tolerance's size (e.g. 1e-10 of position per step: enough to sustain
             # micro-bounces of a ball at rest).
             moved = jnp.where(plain, y_bar, jnp.where(extra, y_extra, y))
-            better = plain & (alpha >= 1.0) & (wnorm(z - y_bar, 1 / rho) <= self.kappa * den)
-            y_new = jnp.where(done, jnp.where(better, y_bar, y), moved)
+            y_new = jnp.where(done, jnp.where(plain & (alpha >= 1.0), y_bar, y), moved)
             shrink = 0.9 * jnp.maximum(self.shrink, self.nu / jnp.where(L > 0, L, 1.0))
             shrink = jnp.where(finite, shrink, self.shrink)
             grown = jnp.minimum(alpha * self.grow, self.alpha_max)

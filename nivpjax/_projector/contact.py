@@ -80,7 +80,14 @@ class UnilateralContact(AbstractProjector):
         return Wt, B, gap0, u_minus, active
 
     @staticmethod
-    def _closed(gap0, u_minus, y0, h):
+    def _roundoff_velocity(u_minus):
+        # Contact velocities below this are round-off (a resting contact carries velocities
+        # of order eps from the previous LCP).
+        eps = jnp.finfo(u_minus.dtype).eps
+        return jnp.sqrt(eps) * (1.0 + jnp.max(jnp.abs(u_minus), initial=0.0))
+
+    @classmethod
+    def _closed(cls, gap0, u_minus, y0, h):
         # Closed up to round-off: the round-off of a gap computed from positions of the
         # state's size, or the distance a round-off velocity covers in the step. A resting
         # body whose gap drifted above zero by the trapezoidal rule's rounding (~1e-17) or
@@ -88,14 +95,16 @@ class UnilateralContact(AbstractProjector):
         # instead of falling for a step and micro-bouncing.
         eps = jnp.finfo(gap0.dtype).eps
         scale = 1.0 + jnp.max(jnp.abs(y0), initial=0.0)
-        roundoff_velocity = jnp.sqrt(eps) * (1.0 + jnp.max(jnp.abs(u_minus), initial=0.0))
-        return gap0 <= jnp.maximum(16 * eps * scale, h * roundoff_velocity)
+        return gap0 <= jnp.maximum(16 * eps * scale, h * cls._roundoff_velocity(u_minus))
 
     @classmethod
     def _resting(cls, gap0, u_minus, y0, h):
-        eps = jnp.finfo(gap0.dtype).eps
-        roundoff_velocity = jnp.sqrt(eps) * (1.0 + jnp.max(jnp.abs(u_minus), initial=0.0))
-        return cls._closed(gap0, u_minus, y0, h) & (u_minus <= roundoff_velocity)
+        return cls._closed(gap0, u_minus, y0, h) & (u_minus <= cls._roundoff_velocity(u_minus))
+
+    def _impacts(self, ctx: ProjectionContext, dtype):
+        # Active contacts approaching faster than round-off at the start of the stage.
+        _, _, gap0, u_minus, active = self._start(ctx, dtype)
+        return gap0, u_minus, active & (u_minus < -self._roundoff_velocity(u_minus))
 
     def violation(self, ctx: ProjectionContext):
         """Penetration at the end of the step of contacts that were open at its start (not
@@ -125,11 +134,7 @@ class UnilateralContact(AbstractProjector):
         the stage applies it from the pre-impact velocity at its start, while the flow
         meets the contact $\tau = -g(y_{\text{prev}})/u^-$ later ($\tau < 0$ when the
         located step ended slightly penetrated). With several impacts, the earliest."""
-        dtype = ctx.y_prev.dtype
-        _, _, gap0, u_minus, active = self._start(ctx, dtype)
-        eps = jnp.finfo(dtype).eps
-        threshold = jnp.sqrt(eps) * (1.0 + jnp.max(jnp.abs(u_minus), initial=0.0))
-        impact = active & (u_minus < -threshold)
+        gap0, u_minus, impact = self._impacts(ctx, ctx.y_prev.dtype)
         tau = jnp.where(impact, -gap0 / jnp.where(impact, u_minus, -1.0), jnp.inf)
         found = jnp.any(impact)
         return jnp.where(found, jnp.min(tau), 0.0), found
@@ -137,10 +142,7 @@ class UnilateralContact(AbstractProjector):
     def impulsive(self, ctx: ProjectionContext):
         """An active contact approaching at the start of the stage is an impact (velocities
         below a round-off threshold, as a resting contact carries, are not)."""
-        _, _, _, u_minus, active = self._start(ctx, ctx.y_iter.dtype)
-        eps = jnp.finfo(u_minus.dtype).eps
-        threshold = jnp.sqrt(eps) * (1.0 + jnp.max(jnp.abs(u_minus), initial=0.0))
-        return jnp.any(active & (u_minus < -threshold))
+        return jnp.any(self._impacts(ctx, ctx.y_iter.dtype)[2])
 
     def __call__(self, z, ctx: ProjectionContext):
         z = jnp.asarray(z)
