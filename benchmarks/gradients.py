@@ -31,8 +31,10 @@ integrates ballistic flight exactly, so without a step cap the steps between imp
 long and the piecewise-linear `t_eval` interpolation is off by up to 0.16 (the computed loss
 by ~40%); the ball's loss therefore caps the step at `h_max = 0.01` (the `h_max` column).
 On the slider the computed loss is accurate (its finite differences match the exact
-derivative) but the derivative is biased by ~13%: stick/slip switch times carry no such
-sensitivity term yet.
+derivative) but the derivative was biased by ~13% while slip reversals carried no
+event-time term; `CoulombFriction.switch_shift` now adds it (derivative accuracy per rtol:
+`python -m benchmarks.calibration`, `benchmarks/results/calibration.md`; this loss not
+re-measured since).
 """
 
 import jax

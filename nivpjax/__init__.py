@@ -1,12 +1,21 @@
 """nivpjax: JAX-native, differentiable time integration of nonsmooth ODE/DAE systems."""
 
 from . import scenes as scenes
+from ._batched import lockstep_waste as lockstep_waste, solve_batched as solve_batched
+from ._cache import enable_persistent_cache as enable_persistent_cache
 from ._controller import (
     AbstractController as AbstractController,
+    AbstractFeatures as AbstractFeatures,
     ConstantStepSize as ConstantStepSize,
+    FeatureMemory as FeatureMemory,
+    IntegralPolicy as IntegralPolicy,
     PIDController as PIDController,
+    PolicyController as PolicyController,
+    PolicyState as PolicyState,
+    StepFeatures as StepFeatures,
     StepInfo as StepInfo,
 )
+from ._fit import FitResult as FitResult, fit as fit
 from ._model import Model as Model
 from ._nonlinear import (
     AbstractNonlinearSolver as AbstractNonlinearSolver,

@@ -22,3 +22,20 @@ def plain_int(value):
     if isinstance(value, np.integer) and not isinstance(value, np.bool_):
         return int(value)
     return value
+
+
+def runtime_float(value):
+    """Converter for real scalars that must be run-time values of a compiled solve (a
+    tolerance, a step bound): a Python or NumPy real scalar becomes a 0-d JAX array, weakly
+    typed like the Python float it replaces (so it never promotes a float32 solve), and is
+    then traced by `jit` instead of being baked into the program. `None`, arrays, tracers and
+    anything invalid are kept as they are, for the field's own check."""
+    import numpy as np
+
+    if isinstance(value, (bool, np.bool_)):
+        return value
+    if isinstance(value, (float, int, np.floating, np.integer)):
+        import jax.numpy as jnp
+
+        return jnp.asarray(float(value))
+    return value

@@ -17,6 +17,7 @@ class _LoopState(eqx.Module):
     t: jax.Array
     h: jax.Array
     h_last: jax.Array
+    h_min: jax.Array  # constant: the step floor
     y: jax.Array
     controller_state: object
     # Counters.
@@ -87,7 +88,7 @@ def _finish_attempts(log: AttemptLog | None) -> AttemptLog | None:
     )
 
 
-def run(
+def init_state(
     model: Model,
     stepper: AbstractStepper,
     controller: AbstractController,
@@ -99,16 +100,15 @@ def run(
     error_mask,
     max_steps: int,
     save_attempts: bool,
-    kind: str,
-    progress,
-    checkpoints: int | None = None,
-) -> Solution:
+) -> _LoopState:
+    """The loop state before the first attempt: the controller's first step and state,
+    consistent algebraic components, empty buffers (`max_steps + 1` rows)."""
     dtype = y0.dtype
     n = y0.shape[0]
     f0 = model.f(t0, y0, args)
-    error_order = stepper.error_order if controller.needs_error_estimate else 1
+    error_order = _error_order(stepper, controller)
     h, controller_state = controller.init(t0, t1, y0, h0, f0, error_order, error_mask)
-    h_min, h_max = controller.bounds
+    h_min = controller.bounds[0]
     h_min = default_h_min(t0, t1, dtype) if h_min is None else jnp.asarray(h_min, dtype)
     h = jnp.maximum(h, h_min)
     result0 = RESULTS.where(
@@ -123,10 +123,11 @@ def run(
         result0 = RESULTS.where(ok, result0, RESULTS.nonlinear_failure)
 
     rows = max_steps + 1
-    state = _LoopState(
+    return _LoopState(
         t=t0,
         h=h,
         h_last=jnp.zeros((), dtype),
+        h_min=h_min,
         y=y0,
         controller_state=controller_state,
         n_accepted=jnp.array(0, jnp.int32),
@@ -146,90 +147,105 @@ def run(
         attempts=_init_attempts(max_steps, dtype) if save_attempts else None,
     )
 
-    def cond(s: _LoopState):
-        return (s.t < t1) & (s.result == RESULTS.successful) & (s.n_attempts < max_steps)
 
-    def body(s: _LoopState):
-        remaining = t1 - s.t
-        # Land on t1 rather than leave a remainder below h_min (float accumulation of
-        # fixed steps would otherwise leave a step of a few ulps).
-        last = s.h >= remaining - h_min
-        h_try = jnp.where(last, remaining, s.h)
-        # A finished member of a vmapped batch still runs this body (its result is
-        # discarded); keep its step finite so nothing divides by zero, even in reverse mode.
-        h_try = jnp.where(h_try > 0, h_try, jnp.maximum(s.h, h_min))
-        h_try = jax.lax.stop_gradient(h_try)
-        out = stepper.step(model, s.t, h_try, s.y, args)
-        y_error = jnp.zeros_like(out.y1) if out.y_error is None else out.y_error
-        violation = model.violation(s.t + h_try, h_try, s.y, out.y1, args)
-        info = StepInfo(
-            t0=s.t,
-            h=h_try,
-            t1=t1,
-            y0=s.y,
-            y1=out.y1,
-            y_error=y_error,
-            error_order=error_order,
-            stats=out.stats,
-            error_mask=error_mask,
-            violation=violation,
-        )
-        accept, h_next, controller_state = controller.adapt(info, s.controller_state)
-        accept = accept & jnp.all(jnp.isfinite(out.y1))
-        # Judge the floor by the proposed step: the last step may be stretched onto t1.
-        at_floor = jnp.minimum(h_try, s.h) <= h_min * (1 + 1e-6)
-        floor_failure = ~accept & at_floor
-        nonlinear_ok = out.stats.nonlinear_result == RESULTS.successful
-        failure_code = RESULTS.where(nonlinear_ok, RESULTS.h_min_reached, RESULTS.nonlinear_failure)
-        result = RESULTS.where(floor_failure, failure_code, s.result)
-        h_next = jnp.maximum(h_next, h_min)
-        if h_max is not None:
-            h_next = jnp.minimum(h_next, h_max)
-        h_next = jax.lax.stop_gradient(h_next)
+def _error_order(stepper, controller):
+    return stepper.error_order if controller.needs_error_estimate else 1
 
-        t_new = jnp.where(accept, jnp.where(last, t1, s.t + h_try), s.t)
-        y_new = jnp.where(accept, out.y1, s.y)
-        idx = s.n_accepted + 1
 
-        def put(buf, x):
-            return eqxi.buffer_at_set(buf, idx, x, pred=accept)
-
-        attempts = s.attempts
-        if attempts is not None:
-            err = jnp.sqrt(jnp.mean(jnp.where(error_mask, y_error, 0.0) ** 2))
-            attempts = _log_attempt(attempts, s.n_attempts, s.t, h_try, accept, err, out.stats)
-        if progress is not None:
-            progress(t_new)
-        return _LoopState(
-            t=t_new,
-            h=h_next,
-            h_last=h_try,
-            y=y_new,
-            controller_state=controller_state,
-            n_accepted=s.n_accepted + accept.astype(jnp.int32),
-            n_rejected=s.n_rejected + (~accept).astype(jnp.int32),
-            n_attempts=s.n_attempts + 1,
-            n_iterations=s.n_iterations + out.stats.iterations.astype(jnp.int32),
-            result=result,
-            ts=put(s.ts, t_new),
-            ys=put(s.ys, y_new),
-            hs=put(s.hs, h_try),
-            multipliers=put(s.multipliers, out.multipliers),
-            iterations=put(s.iterations, out.stats.iterations.astype(dtype)),
-            residual_norms=put(s.residual_norms, out.stats.residual_norm),
-            nonlinear_success=put(s.nonlinear_success, nonlinear_ok.astype(dtype)),
-            attempts=attempts,
-        )
-
-    final = eqxi.while_loop(
-        cond,
-        body,
-        state,
-        max_steps=max_steps,
-        buffers=_buffers,
-        kind=kind,
-        checkpoints=checkpoints if kind == "checkpointed" else None,
+def attempt(
+    s: _LoopState,
+    model: Model,
+    stepper: AbstractStepper,
+    controller: AbstractController,
+    t1,
+    args,
+    error_mask,
+    progress=None,
+) -> _LoopState:
+    """One attempted step of size `s.h` (stretched onto `t1` when close): the step, the
+    controller's decision, the counters and (on acceptance) the buffers. Also usable outside
+    the loop for manual stepping."""
+    h_min = s.h_min
+    h_max = controller.bounds[1]
+    dtype = s.y.dtype
+    remaining = t1 - s.t
+    # Land on t1 rather than leave a remainder below h_min (float accumulation of
+    # fixed steps would otherwise leave a step of a few ulps).
+    last = s.h >= remaining - h_min
+    h_try = jnp.where(last, remaining, s.h)
+    # A finished member of a vmapped batch still runs this body (its result is
+    # discarded); keep its step finite so nothing divides by zero, even in reverse mode.
+    h_try = jnp.where(h_try > 0, h_try, jnp.maximum(s.h, h_min))
+    h_try = jax.lax.stop_gradient(h_try)
+    out = stepper.step(model, s.t, h_try, s.y, args)
+    y_error = jnp.zeros_like(out.y1) if out.y_error is None else out.y_error
+    violation = model.violation(s.t + h_try, h_try, s.y, out.y1, args)
+    next_event = model.next_event(s.t + h_try, h_try, s.y, out.y1, args)
+    info = StepInfo(
+        t0=s.t,
+        h=h_try,
+        t1=t1,
+        y0=s.y,
+        y1=out.y1,
+        y_error=y_error,
+        error_order=_error_order(stepper, controller),
+        stats=out.stats,
+        error_mask=error_mask,
+        violation=violation,
+        next_event=next_event,
     )
+    accept, h_next, controller_state = controller.adapt(info, s.controller_state)
+    accept = accept & jnp.all(jnp.isfinite(out.y1))
+    # Judge the floor by the proposed step: the last step may be stretched onto t1.
+    at_floor = jnp.minimum(h_try, s.h) <= h_min * (1 + 1e-6)
+    floor_failure = ~accept & at_floor
+    nonlinear_ok = out.stats.nonlinear_result == RESULTS.successful
+    failure_code = RESULTS.where(nonlinear_ok, RESULTS.h_min_reached, RESULTS.nonlinear_failure)
+    result = RESULTS.where(floor_failure, failure_code, s.result)
+    h_next = jnp.maximum(h_next, h_min)
+    if h_max is not None:
+        h_next = jnp.minimum(h_next, h_max)
+    h_next = jax.lax.stop_gradient(h_next)
+
+    t_new = jnp.where(accept, jnp.where(last, t1, s.t + h_try), s.t)
+    y_new = jnp.where(accept, out.y1, s.y)
+    idx = s.n_accepted + 1
+
+    def put(buf, x):
+        return eqxi.buffer_at_set(buf, idx, x, pred=accept)
+
+    attempts = s.attempts
+    if attempts is not None:
+        err = jnp.sqrt(jnp.mean(jnp.where(error_mask, y_error, 0.0) ** 2))
+        attempts = _log_attempt(attempts, s.n_attempts, s.t, h_try, accept, err, out.stats)
+    if progress is not None:
+        progress(t_new)
+    return _LoopState(
+        t=t_new,
+        h=h_next,
+        h_last=h_try,
+        h_min=h_min,
+        y=y_new,
+        controller_state=controller_state,
+        n_accepted=s.n_accepted + accept.astype(jnp.int32),
+        n_rejected=s.n_rejected + (~accept).astype(jnp.int32),
+        n_attempts=s.n_attempts + 1,
+        n_iterations=s.n_iterations + out.stats.iterations.astype(jnp.int32),
+        result=result,
+        ts=put(s.ts, t_new),
+        ys=put(s.ys, y_new),
+        hs=put(s.hs, h_try),
+        multipliers=put(s.multipliers, out.multipliers),
+        iterations=put(s.iterations, out.stats.iterations.astype(dtype)),
+        residual_norms=put(s.residual_norms, out.stats.residual_norm),
+        nonlinear_success=put(s.nonlinear_success, nonlinear_ok.astype(dtype)),
+        attempts=attempts,
+    )
+
+
+def finish(final: _LoopState, t1) -> Solution:
+    """The [`nivpjax.Solution`][] of a loop state (after the loop, or after manual steps)."""
+    rows = final.ts.shape[0]
     result = RESULTS.where(
         (final.result == RESULTS.successful) & (final.t < t1),
         RESULTS.time_max_steps_reached,
@@ -258,6 +274,44 @@ def run(
         result=result,
         attempts=_finish_attempts(final.attempts),
     )
+
+
+def run(
+    model: Model,
+    stepper: AbstractStepper,
+    controller: AbstractController,
+    t0,
+    t1,
+    y0,
+    args,
+    h0,
+    error_mask,
+    max_steps: int,
+    save_attempts: bool,
+    kind: str,
+    progress,
+    checkpoints: int | None = None,
+) -> Solution:
+    state = init_state(
+        model, stepper, controller, t0, t1, y0, args, h0, error_mask, max_steps, save_attempts
+    )
+
+    def cond(s: _LoopState):
+        return (s.t < t1) & (s.result == RESULTS.successful) & (s.n_attempts < max_steps)
+
+    def body(s: _LoopState):
+        return attempt(s, model, stepper, controller, t1, args, error_mask, progress)
+
+    final = eqxi.while_loop(
+        cond,
+        body,
+        state,
+        max_steps=max_steps,
+        buffers=_buffers,
+        kind=kind,
+        checkpoints=checkpoints if kind == "checkpointed" else None,
+    )
+    return finish(final, t1)
 
 
 def interpolate(sol: Solution, t_eval):

@@ -44,11 +44,26 @@ class Model(eqx.Module):
 
     def _rate(self, t, y, args):
         """$y'$ on differential rows (zero on algebraic rows): $A_{dd}^{-1} f_d$."""
-        f = jnp.where(self.algebraic, 0.0, self.f(t, y, args))
+        return self.to_state(self.f(t, y, args))
+
+    def to_state(self, v):
+        """$A_{dd}^{-1} v_d$ on differential rows, zero on algebraic rows: turns a vector in
+        the units of $f$ (a rate, a reaction, an error of $A y$) into state units."""
+        v = jnp.where(self.algebraic, 0.0, v)
         if self.mass_matrix is None:
-            return f
-        A = self.mass_matrix + jnp.diag(self.algebraic.astype(y.dtype))
-        return jnp.linalg.solve(A, f)
+            return v
+        A = self.mass_matrix + jnp.diag(self.algebraic.astype(v.dtype))
+        return jnp.linalg.solve(A, v)
+
+    def reaction(self, multipliers):
+        """The constraint reaction of a stage (its residual, per unit time, in the units of
+        $f$) on differential rows; zero on algebraic rows, whose residual is an equation."""
+        return jnp.where(self.algebraic, 0.0, multipliers)
+
+    @property
+    def has_impulses(self) -> bool:
+        """Whether the projector can apply impulses (static)."""
+        return self.projector.has_event_time
 
     def solve_stage(
         self,
@@ -78,6 +93,14 @@ class Model(eqx.Module):
         impact map then contributes $D R\, f^- \delta$) and the stage result moves back
         along the post-event flow by $\delta$ ($-f^+ \delta$).
 
+        Switch sensitivity (`event_sensitivity`): a stage whose solution lies on another
+        branch of a switch than its start (a slip reversal, a relay crossing its surface:
+        `AbstractProjector.switch_shift`) moves its base point by the saltation term
+        $(f^- - f^+)\,d\tau$, zero in value; the branch is read from the iterate, so the
+        implicit function theorem carries the term through the stage's own sensitivity.
+        A stage ending on a switching surface that the flow crosses (a transient stick or
+        landing) moves its result instead.
+
         Returns the nonlinear solution and the stage residual at the solution (the
         constraint reaction per unit time: forces, contact impulses divided by $h$)."""
         alg = self.algebraic
@@ -90,12 +113,19 @@ class Model(eqx.Module):
             y_base = y_base + rate0 * delta
             y_prev = y_prev + rate0 * delta
 
-        def residual(y):
+        switch = None
+        if event_sensitivity and self.projector.has_switch_shift:
+            switch = self._switch_shifts(t_end - h_eff, y_prev, t_end, args)
+
+        def reaction(y, base):
             fy = self.f(t_end, y, args)
-            diff = self.mass_times(y - y_base) / h_eff - theta * fy
+            diff = self.mass_times(y - base) / h_eff - theta * fy
             if f_explicit is not None:
                 diff = diff - (1 - theta) * f_explicit
             return jnp.where(alg, -fy, diff)
+
+        def residual(y):
+            return reaction(y, y_base if switch is None else y_base + switch(y)[0])
 
         alg_rho = self.tau / h_eff
         if self.equation_rows is not None:
@@ -109,11 +139,83 @@ class Model(eqx.Module):
             return self.projector(z, ctx)
 
         sol = solver.solve(residual, project, rho, guess)
-        multipliers = residual(sol.value)
+        multipliers = reaction(sol.value, y_base)
         if delta is not None:
             value = sol.value - self._rate(t_end, sol.value, args) * delta
             sol = eqx.tree_at(lambda s: s.value, sol, value)
+        if switch is not None:
+            _, end, found = switch(sol.value)
+            # Multipliers at a switch take no derivative: a relay's selection at a vertex
+            # has none, and a transient landing's is an artefact of the step (its value
+            # makes the state land), which an explicit stage after it must not read.
+            frozen = jnp.where(alg & found, jax.lax.stop_gradient(sol.value), sol.value)
+            sol = eqx.tree_at(lambda s: s.value, sol, frozen + end)
         return sol, multipliers
+
+    def apply_impacts(self, t0, h, y0, args):
+        r"""The state after the impulses the projector applies at the start of a step of
+        size `h` (see `AbstractProjector.impact`): impacts are resolved first, and the
+        step's stages integrate the smooth flow from there.
+
+        Event sensitivity, as in `solve_stage`: the impact is applied at $t_0$ although
+        the flow meets the contact $\tau$ (`event_time`) later; with
+        $\delta = \tau - \text{stop\_gradient}(\tau)$, zero in value, the state moves along
+        the pre-impact flow by $\delta$ before the impact map and back along the
+        post-impact flow after it, which carries the saltation term $(D I\,f^- - f^+)\,d\tau$
+        into derivatives.
+
+        Returns `(y_plus, timing_error)`: the second is the local error of applying the
+        impact at $t_0$ instead of $t_0 + \tau$, $\tau\,(\dot y^+ - \dot y^-)$ to first
+        order (zero without an impact), which the steppers add to their error estimate: a
+        step that starts well before a contact closes is rejected, and the impact is
+        located to the tolerance."""
+        if not self.has_impulses:
+            return y0, jnp.zeros_like(y0)
+        t1 = t0 + h
+        ctx0 = self._context(t1, h, y0, y0, args)
+        tau, found = self.projector.event_time(ctx0)
+        delta = jnp.where(found, tau - jax.lax.stop_gradient(tau), 0.0)
+        rate_minus = self._rate(t0, y0, args)
+        y_shift = y0 + rate_minus * delta
+        y_plus = self.projector.impact(self._context(t1, h, y_shift, y_shift, args))
+        rate_plus = self._rate(t0, y_plus, args)
+        # Only an early impact (the contact closes later) can be fixed by a shorter step.
+        tau_value = jnp.where(found, jnp.maximum(jax.lax.stop_gradient(tau), 0.0), 0.0)
+        timing_error = jax.lax.stop_gradient(tau_value * (rate_plus - rate_minus))
+        return y_plus - rate_plus * delta, timing_error
+
+    def _switch_shifts(self, t_start, y_start, t_end, args):
+        # The base-point and end-point shifts of a switching stage as functions of the
+        # stage iterate: the projectors' shifts, multiplier jumps mapped through the vector
+        # field.
+        rate0 = self._rate(t_start, y_start, args)
+
+        def rate_at(y):
+            return self._rate(t_start, y, args)
+
+        def through_field(shift):
+            if not self.has_algebraic:
+                return shift
+            on_alg = jnp.where(self.algebraic, shift, 0.0)
+            moved = self._rate(t_start, y_start + on_alg, args) - rate0
+            return jnp.where(self.algebraic, 0.0, shift) + moved
+
+        def shifts(y):
+            h = t_end - t_start
+            ctx = self._context(t_end, h, y_start, y, args, rate=rate0, rate_at=rate_at)
+            base, end, found = self.projector.switch_shift(ctx)
+            return through_field(base), through_field(end), found
+
+        return shifts
+
+    def switch_jump(self, t0, y0, t1, y1, args):
+        r"""The saltation term $(f^- - f^+)\,\delta\tau$ (zero in value) of a switch
+        between `(t0, y0)` and `(t1, y1)`, zero if none: a multistage step moves its
+        earlier points by it, so that they lie on the post-switch branch as the later ones
+        do (to first order)."""
+        if not self.projector.has_switch_shift:
+            return jnp.zeros_like(y0)
+        return self._switch_shifts(t0, y0, t1, args)(y1)[0]
 
     def consistent_initial_state(self, solver, t0, h, y0, args):
         r"""Solve the algebraic rows and the projection at $t_0$ with the differential
@@ -124,15 +226,25 @@ class Model(eqx.Module):
             solver, t0, h, y0, None, 0.0, y0, y0, args, event_sensitivity=False
         )[0]
 
-    def _context(self, t, h, y0, y1, args, rate=None):
+    def _context(self, t, h, y0, y1, args, rate=None, rate_at=None):
         rho = jnp.full_like(y1, h)
-        return ProjectionContext(t=t, h=h, y_prev=y0, y_iter=y1, rho=rho, args=args, rate=rate)
+        return ProjectionContext(
+            t=t, h=h, y_prev=y0, y_iter=y1, rho=rho, args=args, rate=rate, rate_at=rate_at
+        )
 
     def violation(self, t1, h, y0, y1, args):
         """Constraint violation at the end of a step (see `AbstractProjector.violation`).
         The context carries the vector field at the end point (`rate`)."""
         ctx = self._context(t1, h, y0, y1, args, rate=self.f(t1, y1, args))
         return self.projector.violation(ctx)
+
+    def next_event(self, t1, h, y0, y1, args):
+        """Predicted time from `t1 - h` to the first event (see
+        `AbstractProjector.next_event`)."""
+        # Impacts at the start are part of the step: predict from the state after them.
+        y0 = jax.lax.stop_gradient(self.apply_impacts(t1 - h, h, y0, args)[0])
+        ctx = self._context(t1, h, y0, y1, args, rate=self.f(t1, y1, args))
+        return jax.lax.stop_gradient(self.projector.next_event(ctx))
 
     def initial_violation(self, t0, h, y0, args):
         """Violation of the initial state no stage can restore (see
@@ -142,3 +254,9 @@ class Model(eqx.Module):
     def impulsive(self, t1, h, y0, y1, args):
         """Whether a stage from `y0` to `y1` contained an impulse."""
         return self.projector.impulsive(self._context(t1, h, y0, y1, args))
+
+    def switched(self, t1, h, y0, y1, args):
+        """Whether a stage from `y0` to `y1` changed the face of a set-valued law (a relay
+        leaving a bound, friction sticking or slipping, a diode switching, a contact
+        opening or closing), see `AbstractProjector.switched`."""
+        return self.projector.switched(self._context(t1, h, y0, y1, args))

@@ -1,112 +1,34 @@
 """`solve`: validate, assemble, run the compiled loop, build the `Solution`."""
 
-import math
+import contextvars
 from typing import Any, Literal
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._controller import AbstractController, PIDController
+from . import _validate as v
+from ._cache import CachedJit
+from ._controller import AbstractController
 from ._loop import interpolate, run
 from ._model import Model
 from ._progress_meter import progress_callback
-from ._projector import AbstractProjector, Identity
+from ._projector import AbstractProjector
 from ._results import RESULTS
 from ._solution import Solution
-from ._stepper import AbstractStepper, Bathe, Richardson
+from ._stepper import AbstractStepper
+
+
+# Whether a solve traced under a transformation checks its traced inputs in the program
+# (`equinox.error_if`, a host callback). `solve_batched` checks its concrete inputs itself and
+# turns this off: the callbacks do not run under a multi-device sharding.
+_IN_GRAPH_CHECKS: contextvars.ContextVar[bool] = contextvars.ContextVar(
+    "nivpjax_in_graph_checks", default=True
+)
 
 
 class SolveError(RuntimeError):
     """Raised by [`nivpjax.solve`][] with `throw=True` when the run failed."""
-
-
-def _is_traced(x) -> bool:
-    return any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree.leaves(x))
-
-
-def _concrete_float(name, value):
-    if _is_traced(value):
-        return None
-    arr = np.asarray(value)
-    if arr.shape != ():
-        raise ValueError(f"`{name}` must be a scalar, got shape {arr.shape}.")
-    if not np.issubdtype(arr.dtype, np.number) or np.iscomplexobj(arr):
-        raise TypeError(f"`{name}` must be a real number, got {value!r}.")
-    out = float(arr)
-    if not math.isfinite(out):
-        raise ValueError(f"`{name}` must be finite, got {out}.")
-    return out
-
-
-def _check_y0(y0):
-    if isinstance(y0, (list, tuple)):
-        y0 = np.asarray(y0, dtype=float)
-    if not hasattr(y0, "shape") or not hasattr(y0, "dtype"):
-        raise TypeError(f"`y0` must be an array, got {type(y0).__name__}.")
-    if y0.ndim != 1:
-        raise ValueError(f"`y0` must be a 1-D array of shape (n,), got shape {y0.shape}.")
-    if y0.shape[0] == 0:
-        raise ValueError("`y0` must have at least one component.")
-    if not jnp.issubdtype(y0.dtype, jnp.floating):
-        raise TypeError(
-            f"`y0` must have a floating dtype (float32 or float64), got {y0.dtype}. "
-            "Convert it, e.g. `jnp.asarray(y0, float)`."
-        )
-    if not _is_traced(y0) and not np.all(np.isfinite(np.asarray(y0))):
-        bad = np.flatnonzero(~np.isfinite(np.asarray(y0))).tolist()
-        raise ValueError(f"`y0` contains NaN or inf at components {bad}.")
-    return jnp.asarray(y0)
-
-
-def _check_mass_matrix(mass_matrix, n, dtype):
-    if mass_matrix is None:
-        return None, np.zeros(n, bool)
-    if _is_traced(mass_matrix):
-        raise TypeError(
-            "`mass_matrix` must be a concrete array (its zero rows decide which rows are "
-            "algebraic at trace time); pass it outside `jit`/`vmap` or close over it."
-        )
-    try:
-        A = np.asarray(mass_matrix, dtype=float)
-    except (TypeError, ValueError):
-        raise TypeError(
-            f"`mass_matrix` must be a numeric (n, n) array, got {mass_matrix!r}."
-        ) from None
-    if A.shape != (n, n):
-        raise ValueError(
-            f"`mass_matrix` must have shape (n, n) = ({n}, {n}) to match `y0`, got {A.shape}."
-        )
-    if not np.all(np.isfinite(A)):
-        raise ValueError("`mass_matrix` contains NaN or inf.")
-    algebraic = np.all(A == 0, axis=1)
-    if np.array_equal(A, np.eye(n)):
-        return None, algebraic
-    return jnp.asarray(A, dtype), algebraic
-
-
-def _check_vector_field(vector_field, t0, y0, args):
-    if not callable(vector_field):
-        raise TypeError(f"`vector_field` must be callable f(t, y, args), got {vector_field!r}.")
-    try:
-        out = jax.eval_shape(vector_field, t0, y0, args)
-    except TypeError as err:
-        if "positional argument" not in str(err):
-            raise
-        raise TypeError(
-            f"`vector_field` must accept (t, y, args) (diffrax's convention); calling it "
-            f"failed with: {err}"
-        ) from None
-    shape = getattr(out, "shape", None)
-    if shape != y0.shape:
-        raise ValueError(
-            f"`vector_field(t, y, args)` must return an array of the same shape as `y0` "
-            f"{y0.shape}, got {shape if shape is not None else type(out).__name__}."
-        )
-
-
-_ADJOINTS = {"checkpointed": "checkpointed", "forward": "lax"}
 
 
 def solve(
@@ -186,142 +108,35 @@ def solve(
 
     **Raises:** `ValueError`/`TypeError` for bad input, before any work.
     """
-    y0 = _check_y0(y0)
+    y0 = v.check_y0(y0)
     n = y0.shape[0]
     dtype = y0.dtype
-    t0_c = _concrete_float("t0", t0)
-    t1_c = _concrete_float("t1", t1)
-    if t0_c is not None and t1_c is not None and not t1_c > t0_c:
-        raise ValueError(f"`t1` must be greater than `t0`, got t0={t0_c}, t1={t1_c}.")
-    if (
-        not isinstance(max_steps, (int, np.integer))
-        or isinstance(max_steps, (bool, np.bool_))
-        or max_steps < 1
-    ):
-        raise ValueError(f"`max_steps` must be a positive int, got {max_steps!r}.")
-    max_steps = int(max_steps)
-    if projector is None:
-        projector = Identity()
-    if not isinstance(projector, AbstractProjector):
-        raise TypeError(f"`projector` must be an AbstractProjector, got {projector!r}.")
-    projector.validate(n)
-    if stepper is None:
-        stepper = Bathe()
-    if not isinstance(stepper, AbstractStepper):
-        raise TypeError(
-            f"`stepper` must be an AbstractStepper (e.g. nivpjax.BackwardEuler()), got {stepper!r}."
-        )
-    if controller is None:
-        controller = PIDController()
-    if not isinstance(controller, AbstractController):
-        raise TypeError(f"`controller` must be an AbstractController, got {controller!r}.")
-    if error_estimate not in ("auto", "embedded", "richardson"):
-        raise ValueError(
-            "`error_estimate` must be one of 'auto', 'embedded', 'richardson', got "
-            f"{error_estimate!r}."
-        )
-    if adjoint not in _ADJOINTS:
-        raise ValueError(f"`adjoint` must be 'checkpointed' or 'forward', got {adjoint!r}.")
-    if checkpoints is not None:
-        if not isinstance(checkpoints, (int, np.integer)) or isinstance(
-            checkpoints, (bool, np.bool_)
-        ):
-            raise TypeError(f"`checkpoints` must be a positive int or None, got {checkpoints!r}.")
-        if checkpoints < 1:
-            raise ValueError(f"`checkpoints` must be a positive int or None, got {checkpoints!r}.")
-        if adjoint != "checkpointed":
-            raise ValueError(
-                f"`checkpoints` only applies to adjoint='checkpointed', got adjoint={adjoint!r}."
-            )
-        checkpoints = min(int(checkpoints), max_steps)
-    if (
-        isinstance(tau, (str, bytes))
-        or not np.issubdtype(np.asarray(tau).dtype, np.number)
-        or np.iscomplexobj(tau)
-    ):
-        raise TypeError(f"`tau` must be a positive number or array, got {tau!r}.")
-    tau_arr = np.asarray(tau, dtype=float)
-    if tau_arr.shape not in ((), (n,)) or not np.all(np.isfinite(tau_arr) & (tau_arr > 0)):
-        raise ValueError(
-            f"`tau` must be a positive finite scalar or an array of shape ({n},), got {tau!r}."
-        )
-    if equation_rows is not None:
-        equation_rows = np.asarray(equation_rows, bool)
-        if equation_rows.shape != (n,):
-            raise ValueError(
-                f"`equation_rows` must be a boolean array of shape ({n},), got "
-                f"{equation_rows.shape}."
-            )
-        equation_rows = jnp.asarray(equation_rows)
-    if h0 is not None:
-        h0_c = _concrete_float("h0", h0)
-        if h0_c is not None and not h0_c > 0:
-            raise ValueError(f"`h0` must be positive, got {h0_c}.")
-    h_min, h_max = controller.bounds
-    if h_min is not None and not (math.isfinite(h_min) and h_min >= 0):
-        raise ValueError(f"`h_min` must be finite and non-negative, got {h_min}.")
-    if h_max is not None and not (math.isfinite(h_max) and h_max > 0):
-        raise ValueError(f"`h_max` must be finite and positive, got {h_max}.")
-    if h0 is None and controller.requires_h0:
-        raise ValueError(f"{type(controller).__name__} needs an initial step `h0`.")
-    if h_min is not None and h_max is not None and h_min > h_max:
-        raise ValueError(f"`h_min` must not exceed `h_max`, got {h_min} > {h_max}.")
-
-    if controller.needs_error_estimate:
-        if error_estimate == "embedded" and stepper.error_order == 0:
-            raise ValueError(
-                f"{type(stepper).__name__} has no embedded error estimate; use "
-                "error_estimate='richardson' or 'auto', or nivpjax.EmbeddedBETR."
-            )
-        if error_estimate == "richardson" or stepper.error_order == 0:
-            stepper = Richardson(stepper)
-
-    mass, algebraic = _check_mass_matrix(mass_matrix, n, dtype)
-    t0 = jnp.asarray(t0, dtype)
-    t1 = jnp.asarray(t1, dtype)
-    _check_vector_field(vector_field, t0, y0, args)
-    error_mask = getattr(controller, "error_mask", None)
-    if error_mask is None:
-        error_mask = ~algebraic
-    else:
-        error_mask = np.asarray(error_mask, bool)
-        if error_mask.shape != (n,):
-            raise ValueError(
-                f"`error_mask` must be a boolean array of shape ({n},), got {error_mask.shape}."
-            )
-    if t_eval is not None:
-        if not _is_traced(t_eval) and (
-            isinstance(t_eval, (str, bytes))
-            or not np.issubdtype(np.asarray(t_eval).dtype, np.number)
-            or np.iscomplexobj(t_eval)
-        ):
-            raise TypeError(f"`t_eval` must be an array of real times, got {t_eval!r}.")
-        t_eval = jnp.atleast_1d(jnp.asarray(t_eval, dtype))
-        if t_eval.ndim != 1:
-            raise ValueError(f"`t_eval` must be 1-D, got shape {t_eval.shape}.")
-        if not _is_traced(t_eval) and t0_c is not None and t1_c is not None:
-            te = np.asarray(t_eval)
-            if not np.all(np.isfinite(te)):
-                raise ValueError("`t_eval` contains NaN or inf.")
-            if np.any(np.diff(te) < 0):
-                raise ValueError("`t_eval` must be sorted in increasing order.")
-            if te.min() < t0_c or te.max() > t1_c:
-                raise ValueError(
-                    f"`t_eval` must lie within [t0, t1] = [{t0_c}, {t1_c}], got values in "
-                    f"[{te.min()}, {te.max()}]."
-                )
-
+    t0_c, t1_c = v.check_times(t0, t1)
+    max_steps = v.check_max_steps(max_steps)
+    projector, stepper, controller = v.check_components(projector, stepper, controller, n)
+    checkpoints = v.check_modes(error_estimate, adjoint, checkpoints, max_steps)
+    tau_arr = v.check_tau(tau, n)
+    equation_rows = v.check_equation_rows(equation_rows, n)
+    v.check_step_bounds(controller, h0)
+    stepper = v.error_stepper(stepper, controller, error_estimate)
+    mass, algebraic = v.check_mass_matrix(mass_matrix, n, dtype)
+    # NumPy where concrete: `jit` transfers them on its fast path (a `jnp.asarray` each
+    # would cost a dispatch).
+    t0 = v.as_array(t0, dtype)
+    t1 = v.as_array(t1, dtype)
+    error_mask = v.check_error_mask(controller, algebraic, n)
+    t_eval = v.check_t_eval(t_eval, dtype, t0_c, t1_c)
     model = Model(
         vector_field=vector_field,
         projector=projector,
         mass_matrix=mass,
-        algebraic=jnp.asarray(algebraic),
+        algebraic=algebraic,
         tau=float(tau_arr) if tau_arr.shape == () else jnp.asarray(tau_arr, dtype),
         equation_rows=equation_rows,
         has_algebraic=bool(algebraic.any()),
     )
-    traced = _is_traced((y0, t0, t1, args, t_eval, h0))
-    sol = _solve_jit(
+    traced = v.is_traced((y0, t0, t1, args, t_eval, h0))
+    call = _solve_jit.prepare(
         model,
         stepper,
         controller,
@@ -330,22 +145,25 @@ def solve(
         y0,
         args,
         h0,
-        jnp.asarray(error_mask),
+        error_mask,
         t_eval,
         max_steps,
         save_attempts,
-        _ADJOINTS[adjoint],
+        v.ADJOINTS[adjoint],
         checkpoints,
         progress,
         throw and traced,
+        traced and _IN_GRAPH_CHECKS.get(),
     )
+    if not call.known:  # traces the user's function: only for a new structure or new types
+        v.check_vector_field(vector_field, t0, y0, args)
+    sol = call()
     if throw and not traced:
         _raise_if_failed(sol)
     return sol
 
 
-@eqx.filter_jit
-def _solve_jit(
+def _solve_impl(
     model,
     stepper,
     controller,
@@ -362,10 +180,12 @@ def _solve_jit(
     checkpoints,
     progress,
     throw_inside,
+    check_inside,
 ):
     meter = progress_callback(t0, t1) if progress else None
-    y0 = eqx.error_if(y0, ~jnp.all(jnp.isfinite(y0)), "`y0` contains NaN or inf.")
-    y0 = eqx.error_if(y0, ~(t1 > t0), "`t1` must be greater than `t0`.")
+    if check_inside:  # concrete inputs were checked before the call
+        y0 = eqx.error_if(y0, ~jnp.all(jnp.isfinite(y0)), "`y0` contains NaN or inf.")
+        y0 = eqx.error_if(y0, ~(t1 > t0), "`t1` must be greater than `t0`.")
     sol = run(
         model,
         stepper,
@@ -394,6 +214,9 @@ def _solve_jit(
     return sol
 
 
+_solve_jit = CachedJit(_solve_impl)
+
+
 def _raise_if_failed(sol: Solution):
     result = sol.result
     if np.ndim(result._value) != 0:
@@ -405,7 +228,7 @@ def _raise_if_failed(sol: Solution):
                 "`Solution.result` per member."
             )
         return
-    if result == RESULTS.successful:
+    if int(np.asarray(result._value)) == int(RESULTS.successful._value):
         return
     k = int(sol.n_accepted)
     t = float(sol.t_final)

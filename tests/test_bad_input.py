@@ -391,14 +391,32 @@ def test_solve_rejects_wrong_component_types(kwargs, match):
         run_solve(**kwargs)
 
 
+class PlainEuler(nj.AbstractStepper):
+    """A user's stepper without an embedded error estimate (`error_order` 0)."""
+
+    solver: nj.AbstractNonlinearSolver = eqx.field(default_factory=nj.SemismoothNewton)
+
+    @property
+    def order(self):
+        return 1
+
+    def step(self, model, t0, h, y0, args):
+        return nj.BackwardEuler(self.solver).step(model, t0, h, y0, args)
+
+
+def test_solve_rejects_embedded_estimate_without_one():
+    match = r"PlainEuler has no embedded error estimate; use error_estimate='richardson'"
+    with pytest.raises(ValueError, match=match):
+        run_solve(stepper=PlainEuler(), error_estimate="embedded")
+
+
 @pytest.mark.parametrize(
     "stepper", [nj.Bathe(), nj.BackwardEuler(), nj.Trapezoidal(), nj.Theta(0.75)], ids=repr
 )
-def test_solve_rejects_embedded_estimate_without_one(stepper):
-    name = type(stepper).__name__
-    match = rf"{name} has no embedded error estimate; use error_estimate='richardson'"
-    with pytest.raises(ValueError, match=match):
-        run_solve(stepper=stepper, error_estimate="embedded")
+def test_builtin_steppers_have_embedded_estimates(stepper):
+    # Every built-in stepper carries an embedded estimate, so "auto" never pays for step
+    # doubling; its order is one above the propagated solution's.
+    assert stepper.error_order == stepper.order + 1
 
 
 # A bad controller setting is rejected either by the controller's constructor or by `solve`

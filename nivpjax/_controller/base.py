@@ -23,6 +23,10 @@ class StepInfo(eqx.Module):
     - `violation`: constraint violation at `y1` of constraints inactive at `y0` (e.g. a
       contact crossed inside the step), in state units; adaptive controllers count it as
       error so that such events get located.
+    - `next_event`: the predicted time from `t0` to the first nonsmooth event (a contact
+      closing, a switching function crossing zero) that the projector foresees from the
+      data at both ends of the attempt, inside the attempt or beyond it; `inf` when none
+      is predicted (see [`nivpjax.AbstractProjector.next_event`][]).
     """
 
     t0: Float[Array, ""]
@@ -35,6 +39,7 @@ class StepInfo(eqx.Module):
     stats: StepStats
     error_mask: Bool[Array, " n"]
     violation: Float[Array, ""]
+    next_event: Float[Array, ""]
 
 
 class AbstractController(eqx.Module):

@@ -5,10 +5,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._custom_types import plain_int
+from .._custom_types import FloatScalar, plain_int, runtime_float
 from .._norms import scaled_rms_norm
 from .._results import RESULTS
 from .base import AbstractController, StepInfo
+from .events import land_before_event
 
 
 class PIDController(AbstractController):
@@ -31,7 +32,10 @@ class PIDController(AbstractController):
 
     **Arguments:**
 
-    - `rtol`, `atol`: tolerances (positive).
+    - `rtol`, `atol`: tolerances (positive).  Stored as (weakly typed) JAX scalars, like
+      `h_min` and `h_max`: they are run-time values of the compiled solve, so a sweep over
+      tolerances or step bounds compiles once. Only whether `h_min`/`h_max` is `None` is
+      part of the compiled structure.
     - `pcoeff`, `icoeff`, `dcoeff`: PID coefficients (default: integral only, i.e. the
       classical controller).
     - `safety`, `factormin`, `factormax`: factor safety and clipping.
@@ -42,21 +46,33 @@ class PIDController(AbstractController):
     - `nonlinear_factor`: shrink factor after a failed nonlinear solve.
     - `error_order`: overrides the stepper's error order $k$ in the exponents (`None`: use
       the stepper's).
+    - `event_prediction`: land steps just before the next nonsmooth event that the
+      projector predicts (`StepInfo.next_event`: a contact closing, a switching function
+      reaching zero), so events are met at step boundaries instead of being located by
+      rejections. After a rejection whose attempt crossed an event, the next attempt
+      lands just before that event; after an acceptance the next step is shortened to
+      the event when it comes before the error-controlled step. A step that already
+      starts within 1% of its size from the event steps over it (the event then
+      sits at the start of the step, where the scheme resolves it). Rejection by the
+      error test stays the safety net.
+    - `event_margin`: relative distance short of the predicted event to land at.
     """
 
-    rtol: float = 1e-3
-    atol: float = 1e-6
+    rtol: FloatScalar = eqx.field(default=1e-3, converter=runtime_float)
+    atol: FloatScalar = eqx.field(default=1e-6, converter=runtime_float)
     pcoeff: float = 0.0
     icoeff: float = 1.0
     dcoeff: float = 0.0
     safety: float = 0.9
     factormin: float = 0.2
     factormax: float = 10.0
-    h_min: float | None = None
-    h_max: float | None = None
+    h_min: FloatScalar | None = eqx.field(default=None, converter=runtime_float)
+    h_max: FloatScalar | None = eqx.field(default=None, converter=runtime_float)
     error_mask: jax.Array | None = None
     nonlinear_factor: float = 0.25
     error_order: int | None = eqx.field(static=True, default=None, converter=plain_int)
+    event_prediction: bool = eqx.field(static=True, default=True)
+    event_margin: float = 1e-8
 
     def __check_init__(self):
         for name in ("rtol", "atol", "safety"):
@@ -67,6 +83,7 @@ class PIDController(AbstractController):
                 np.asarray(value).dtype, np.number
             ):
                 raise TypeError(f"`{name}` must be a real number, got {value!r}.")
+            value = np.asarray(value)  # checked on the host: no JAX dispatch per check
             if not (np.isfinite(value) and value > 0):
                 raise ValueError(f"`{name}` must be positive and finite, got {value}.")
         for name in ("h_min", "h_max"):
@@ -79,7 +96,9 @@ class PIDController(AbstractController):
                 raise TypeError(f"`{name}` must be a real number, got {value!r}.")
             if not np.isfinite(value):
                 raise ValueError(f"`{name}` must be finite, got {value}.")
-        if self.h_min is not None and self.h_max is not None and self.h_min > self.h_max:
+        bounds = (self.h_min, self.h_max)
+        concrete = not any(isinstance(b, jax.core.Tracer) or b is None for b in bounds)
+        if concrete and np.asarray(self.h_min) > np.asarray(self.h_max):
             raise ValueError(
                 f"`h_min` must not exceed `h_max`, got h_min={self.h_min}, h_max={self.h_max}."
             )
@@ -145,6 +164,8 @@ class PIDController(AbstractController):
         factor = jnp.where(ok, factor, self.nonlinear_factor)
         factor = jax.lax.stop_gradient(factor)
         h_next = info.h * factor
+        if self.event_prediction:
+            h_next = land_before_event(info, accept, ok, h_next, self.event_margin)
         if self.h_max is not None:
             h_next = jnp.minimum(h_next, self.h_max)
         new_state = (jnp.where(accept, inv, prev), jnp.where(accept, prev, prev_prev), ~accept)

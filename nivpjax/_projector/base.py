@@ -6,6 +6,7 @@ from typing import Any
 
 import equinox as eqx
 import jax.numpy as jnp
+from jax import lax
 from jaxtyping import Array, Bool, Float, PyTree
 
 
@@ -20,14 +21,18 @@ class ProjectionContext(eqx.Module):
     - `y_iter`: the current nonlinear iterate. State-dependent bounds (e.g. a friction bound
         $\\mu N(y)$) are evaluated here, so autodiff supplies their chain rule in the
         generalised Jacobian.
-    - `rho`: the per-component scaling $\rho$ of the stage's map $y - \rho R(y)$ (for the
+    - `rho`: the per-component scaling $\\rho$ of the stage's map $y - \\rho R(y)$ (for the
         components the projector acts on). Proximal maps (Coulomb friction without a
         multiplier state) and resolvents need it; true projections ignore it.
     - `args`: the user's parameters.
     - `block`: inside a [`nivpjax.BlockProjector`][], the indices of the block being
       projected (`None` outside one); `restrict` maps a full-state vector to the block.
-    - `rate`: the vector field $f(t, y_{\text{iter}})$ at the end of a step, full state;
-      set only when a step's `violation` is checked (`None` inside a stage).
+    - `rate`: the vector field $f(t, y_{\\text{iter}})$ at the end of a step, full state;
+      set only when a step's `violation` is checked (`None` inside a stage). For
+      `switch_shift`, the rate of the differential rows at the stage start instead.
+    - `rate_at`: for `switch_shift` only, the rate of the differential rows at the stage
+      start as a function of the full state (to evaluate it on another branch of a
+      switch: other multiplier values); `None` otherwise.
     """
 
     t: Float[Array, ""]
@@ -38,6 +43,7 @@ class ProjectionContext(eqx.Module):
     args: PyTree[Any]
     block: tuple[int, ...] | None = eqx.field(static=True, default=None)
     rate: Float[Array, " n"] | None = None
+    rate_at: Callable[[Array], Array] | None = None
 
     def restrict(self, v):
         """The components of a full-state vector `v` that belong to this block."""
@@ -92,6 +98,16 @@ class AbstractProjector(eqx.Module):
         round-off. Default: 0 (constraints enforced by the first stage)."""
         return jnp.zeros((), ctx.y_prev.dtype)
 
+    def next_event(self, ctx: ProjectionContext) -> Float[Array, ""]:
+        """The predicted time, from the start of the attempt `ctx.t - ctx.h`, of the first
+        event (a contact closing, a switching function crossing zero) after the attempt's
+        start, estimated from the data at its two ends `ctx.y_prev` and `ctx.y_iter`
+        (`ctx.rate` holds the vector field at the end). It may lie inside the attempt (the
+        event was crossed) or beyond it (the event is coming). Controllers use it to
+        propose a step that lands just past the event; rejection stays the safety net.
+        Default: `inf` (nothing predicted)."""
+        return jnp.full((), jnp.inf, ctx.y_iter.dtype)
+
     @property
     def has_event_time(self) -> bool:
         """Whether `event_time` can report an event (static: a model without one skips the
@@ -107,6 +123,51 @@ class AbstractProjector(eqx.Module):
         no event."""
         return jnp.zeros((), ctx.y_prev.dtype), jnp.zeros((), bool)
 
+    def impact(self, ctx: ProjectionContext) -> Float[Array, " n"]:
+        """The state (restricted to the projector's components) right after the impulses
+        the projector applies at the start of a step, from `ctx.y_prev`: Newton's impact
+        law for contacts that are closed (or closing within the step) and approaching.
+        Steppers apply it before their stages, so that the stages integrate the smooth
+        flow after the impact (Moreau's impact-then-flow). Default: no impulse."""
+        return ctx.restrict(ctx.y_prev)
+
+    def switched(self, ctx: ProjectionContext) -> Bool[Array, ""]:
+        """Whether the stage from `ctx.y_prev` to `ctx.y_iter` changed the face of the set
+        that the state lies on (a multiplier leaving a bound or reaching one, friction
+        sticking or slipping, a contact opening or closing): the rate may then jump inside
+        the stage, so multistep stages (Bathe's backward difference) must not extrapolate
+        across it. Default: False (a single smooth piece)."""
+        return jnp.zeros((), bool)
+
+    @property
+    def has_switch_shift(self) -> bool:
+        """Whether `switch_shift` can report a switch (static: a model without one skips
+        the switch-sensitivity work of each stage)."""
+        return False
+
+    def switch_shift(
+        self, ctx: ProjectionContext
+    ) -> tuple[Float[Array, " m"], Float[Array, " m"], Bool[Array, ""]]:
+        r"""The event-time (saltation) sensitivity of a stage that switches branch:
+        `(base_shift, end_shift, found)`, two vectors over the projector's components that
+        are zero in value, and whether the stage switched.
+
+        Called with `ctx.y_prev` the stage start, `ctx.y_iter` the stage solution (its
+        branch is read there) and `ctx.rate` the rate of the differential rows at the stage
+        start ($A^{-1} f$ there, zero on algebraic rows). With the switch at
+        $\tau = -s_0/\dot s^-$ after the stage start ($s$ the switching function),
+        `base_shift` has derivative $(f^- - f^+)\,d\tau$: the stage adds it to its base
+        point, so the saltation term propagates through the stage's own sensitivity.
+        `end_shift` is added to the stage's solution instead, for a stage whose result does
+        not depend on its start (a velocity stuck by friction on its way to reversing).
+        On differential components the entries are state displacements (a jump of the
+        friction force times $\delta\tau$); on algebraic components of `base_shift`,
+        multiplier displacements (a relay selection jump times $\delta\tau$) that the
+        model maps through the vector field. Default: no switch (or a vector field
+        continuous across it: no first-order term is missing)."""
+        zero = jnp.zeros_like(ctx.rho)
+        return zero, zero, jnp.zeros((), bool)
+
     def impulsive(self, ctx: ProjectionContext) -> Bool[Array, ""]:
         """Whether the stage from `ctx.y_prev` to `ctx.y_iter` contained an impulse (a jump
         of the state, e.g. an impact). Multistep stages (Bathe's backward difference) must
@@ -117,9 +178,26 @@ class AbstractProjector(eqx.Module):
 Bound = Float[Array, "..."] | Callable[[Any, Any, Any], Any]
 
 
+def face(z, lower, upper):
+    """The face of the interval $[\\ell, u]$ that `z` lies on: -1 at the lower bound (or
+    below), +1 at the upper bound (or above), 0 inside."""
+    return jnp.where(z <= lower, -1, jnp.where(z >= upper, 1, 0))
+
+
 def resolve(value, ctx: ProjectionContext, dtype) -> Array:
     """Evaluate a bound that is either an array or a callable `bound(t, y, args)` of the
     current iterate."""
     if callable(value):
         value = value(ctx.t, ctx.y_iter, ctx.args)
     return jnp.asarray(value, dtype=dtype)
+
+
+def switch_delay(s0, sdot, found):
+    r"""$\delta = \tau - \text{stop\_gradient}(\tau)$ with $\tau = -s_0/\dot s^-$, the first-order
+    time from the stage start to the zero of a switching function $s$ ($s_0$ its value at
+    the start, $\dot s^-$ its rate on the pre-switch branch): zero in value, derivative
+    $d\tau$. Zero where nothing switched or $\dot s^- = 0$ (a grazing switch has no
+    first-order time)."""
+    ok = found & (sdot != 0)
+    tau = -s0 / jnp.where(ok, sdot, 1.0)
+    return jnp.where(ok, tau - lax.stop_gradient(tau), 0.0)

@@ -85,12 +85,21 @@ class BlockProjector(AbstractProjector):
             args=ctx.args,
             block=indices,
             rate=ctx.rate,
+            rate_at=ctx.rate_at,
         )
 
     def violation(self, ctx: ProjectionContext):
         out = jnp.zeros((), ctx.y_iter.dtype)
         for indices, projector in self.blocks:
             out = jnp.maximum(out, projector.violation(self._sub(ctx, indices, ctx.y_iter.shape)))
+        return out
+
+    def next_event(self, ctx: ProjectionContext):
+        """The earliest predicted event of the blocks."""
+        out = jnp.full((), jnp.inf, ctx.y_iter.dtype)
+        for indices, projector in self.blocks:
+            sub = self._sub(ctx, indices, ctx.y_iter.shape)
+            out = jnp.minimum(out, projector.next_event(sub))
         return out
 
     def initial_violation(self, ctx: ProjectionContext):
@@ -115,8 +124,39 @@ class BlockProjector(AbstractProjector):
             found = found | found_b
         return jnp.where(found, tau, 0.0), found
 
+    @property
+    def has_switch_shift(self) -> bool:
+        return any(projector.has_switch_shift for _, projector in self.blocks)
+
+    def switch_shift(self, ctx: ProjectionContext):
+        """Each block's switch shifts on its own components."""
+        base = end = jnp.zeros_like(ctx.rho)
+        found = jnp.zeros((), bool)
+        for indices, projector in self.blocks:
+            if projector.has_switch_shift:
+                idx = np.asarray(indices)
+                b, e, found_b = projector.switch_shift(self._sub(ctx, indices, ctx.rho.shape))
+                base = base.at[idx].set(b)
+                end = end.at[idx].set(e)
+                found = found | found_b
+        return base, end, found
+
     def impulsive(self, ctx: ProjectionContext):
         out = jnp.zeros((), bool)
         for indices, projector in self.blocks:
             out = out | projector.impulsive(self._sub(ctx, indices, ctx.y_iter.shape))
+        return out
+
+    def impact(self, ctx: ProjectionContext):
+        out = ctx.restrict(ctx.y_prev)
+        for indices, projector in self.blocks:
+            if projector.has_event_time:
+                sub = self._sub(ctx, indices, ctx.y_prev.shape)
+                out = out.at[np.asarray(indices)].set(projector.impact(sub))
+        return out
+
+    def switched(self, ctx: ProjectionContext):
+        out = jnp.zeros((), bool)
+        for indices, projector in self.blocks:
+            out = out | projector.switched(self._sub(ctx, indices, ctx.y_iter.shape))
         return out

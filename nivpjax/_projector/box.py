@@ -3,7 +3,7 @@
 import jax
 import jax.numpy as jnp
 
-from .base import AbstractProjector, Bound, ProjectionContext, resolve
+from .base import AbstractProjector, Bound, ProjectionContext, face, resolve
 
 
 @jax.custom_jvp
@@ -53,6 +53,14 @@ class Box(AbstractProjector):
         upper = resolve(self.upper, ctx, z.dtype)
         return clip(z, lower, upper)
 
+    def switched(self, ctx: ProjectionContext):
+        """A component moved onto, off or between the bounds."""
+        dtype = ctx.y_iter.dtype
+        lower = resolve(self.lower, ctx, dtype)
+        upper = resolve(self.upper, ctx, dtype)
+        z0, z1 = ctx.restrict(ctx.y_prev), ctx.restrict(ctx.y_iter)
+        return jnp.any(face(z0, lower, upper) != face(z1, lower, upper))
+
 
 class NonNegative(AbstractProjector):
     r"""Projection onto the non-negative orthant, $\max(z, 0)$: unilateral constraints,
@@ -62,6 +70,11 @@ class NonNegative(AbstractProjector):
     def __call__(self, z, ctx: ProjectionContext):
         z = jnp.asarray(z)
         return clip(z, jnp.zeros((), z.dtype), jnp.asarray(jnp.inf, z.dtype))
+
+    def switched(self, ctx: ProjectionContext):
+        """A component became zero or positive."""
+        z0, z1 = ctx.restrict(ctx.y_prev), ctx.restrict(ctx.y_iter)
+        return jnp.any((z0 <= 0) != (z1 <= 0))
 
 
 def sign_resolvent_interval(z, tau_s):

@@ -7,6 +7,7 @@ import jax.numpy as jnp
 
 from .base import AbstractProjector, Bound, ProjectionContext, resolve
 from .lcp import lcp_solve
+from .predict import first_root
 
 
 class UnilateralContact(AbstractProjector):
@@ -115,6 +116,32 @@ class UnilateralContact(AbstractProjector):
         is_open = ~self._closed(gap0, u_minus, ctx.y_prev, ctx.h)
         return jnp.max(jnp.where(is_open, jnp.maximum(-gap1, 0.0), 0.0), initial=0.0)
 
+    def next_event(self, ctx: ProjectionContext):
+        r"""The first closing of a contact after the start of the attempt, from the gap's
+        quadratic model $g(\tau) = g + u \tau + \tfrac12 a \tau^2$, $u = W^T v$ the normal
+        velocity and $a = W^T \dot v$ the normal acceleration of the vector field at the
+        attempt's end (`ctx.rate`; exact for a body under constant acceleration).
+
+        The model runs from the start of the attempt; if it predicts no closing inside
+        the attempt, it runs again from the end, after Newton's law has been applied to
+        contacts that close there ($u^+ = -e u^-$): a step that lands just before an
+        impact then predicts the flight after it. Resting contacts predict nothing."""
+        dtype = ctx.y_iter.dtype
+        Wt0, _, gap0, u0, _ = self._start(ctx, dtype)
+        rate = jnp.zeros_like(ctx.y_iter) if ctx.rate is None else ctx.rate
+        a = Wt0 @ ctx.restrict(rate)
+        resting0 = self._resting(gap0, u0, ctx.y_prev, ctx.h)
+        from_start = jnp.min(jnp.where(resting0, jnp.inf, first_root(gap0, u0, a)), initial=jnp.inf)
+        gap1 = jnp.atleast_1d(jnp.asarray(self.gap(ctx.t, ctx.y_iter, ctx.args), dtype))
+        u1 = Wt0 @ ctx.restrict(ctx.y_iter)
+        e = jnp.broadcast_to(resolve(self.restitution, ctx, dtype), u1.shape)
+        closing = (gap1 + self.lookahead * ctx.h * u1 <= 0) & (u1 < 0)
+        gap1 = jnp.where(closing, jnp.maximum(gap1, 0.0), gap1)
+        u1 = jnp.where(closing, -e * u1, u1)
+        resting1 = self._resting(gap1, u1, ctx.y_iter, ctx.h)
+        from_end = jnp.min(jnp.where(resting1, jnp.inf, first_root(gap1, u1, a)), initial=jnp.inf)
+        return jnp.where(from_start <= ctx.h, from_start, ctx.h + from_end)
+
     def initial_violation(self, ctx: ProjectionContext):
         """Initial penetration beyond round-off ($\\sqrt\\varepsilon$ relative to the state):
         a velocity-level contact cannot push a body out, so the run would stay inside."""
@@ -139,14 +166,38 @@ class UnilateralContact(AbstractProjector):
         found = jnp.any(impact)
         return jnp.where(found, jnp.min(tau), 0.0), found
 
+    def switched(self, ctx: ProjectionContext):
+        """A contact started or stopped resting (carrying a reaction) between the two
+        ends: the acceleration jumps there. A contact that an impact leaves separating
+        opens without a jump of the rate."""
+        dtype = ctx.y_iter.dtype
+        Wt, _, gap0, u0, _ = self._start(ctx, dtype)
+        gap1 = jnp.atleast_1d(jnp.asarray(self.gap(ctx.t, ctx.y_iter, ctx.args), dtype))
+        u1 = Wt @ ctx.restrict(ctx.y_iter)
+        resting0 = self._resting(gap0, u0, ctx.y_prev, ctx.h)
+        resting1 = self._resting(gap1, u1, ctx.y_iter, ctx.h)
+        return jnp.any(resting0 != resting1)
+
     def impulsive(self, ctx: ProjectionContext):
         """An active contact approaching at the start of the stage is an impact (velocities
         below a round-off threshold, as a resting contact carries, are not)."""
         return jnp.any(self._impacts(ctx, ctx.y_iter.dtype)[2])
 
+    def impact(self, ctx: ProjectionContext):
+        r"""Newton's impact law at the start state on the impacting contacts (active and
+        approaching faster than round-off): $0 \le p \perp W^T(v + Bp) + e u^- \ge 0$ from
+        $v$ = the start velocities; other contacts are left alone."""
+        z = ctx.restrict(ctx.y_prev)
+        _, _, impacts = self._impacts(ctx, z.dtype)
+        return self._project(z, ctx, impacts)
+
     def __call__(self, z, ctx: ProjectionContext):
         z = jnp.asarray(z)
-        Wt, B, _, u_minus, active = self._start(ctx, z.dtype)
+        return self._project(z, ctx, None)
+
+    def _project(self, z, ctx: ProjectionContext, active):
+        Wt, B, _, u_minus, start_active = self._start(ctx, z.dtype)
+        active = start_active if active is None else active
         e = jnp.broadcast_to(resolve(self.restitution, ctx, z.dtype), u_minus.shape)
         m = u_minus.shape[0]
         D = Wt @ B

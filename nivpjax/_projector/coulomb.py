@@ -4,8 +4,9 @@ import equinox as eqx
 import jax.numpy as jnp
 
 from .ball import project_ball
-from .base import AbstractProjector, Bound, ProjectionContext, resolve
+from .base import AbstractProjector, Bound, ProjectionContext, resolve, switch_delay
 from .box import clip
+from .predict import secant_crossing
 
 
 class CoulombFriction(AbstractProjector):
@@ -74,6 +75,67 @@ class CoulombFriction(AbstractProjector):
             excess = jnp.abs(force) - c
         missed = jnp.max(jnp.where(stuck, ctx.h * jnp.maximum(excess, 0.0), 0.0), initial=0.0)
         return jnp.maximum(out, missed)
+
+    def next_event(self, ctx: ProjectionContext):
+        """A sliding velocity reaching zero (stick or reversal), along the secant through
+        its values at the two ends of the attempt (interval friction only)."""
+        if self.isotropic:
+            return jnp.full((), jnp.inf, ctx.y_iter.dtype)
+        v0, v1 = ctx.restrict(ctx.y_prev), ctx.restrict(ctx.y_iter)
+        return jnp.min(secant_crossing(v0, v1, ctx.h), initial=jnp.inf)
+
+    def switched(self, ctx: ProjectionContext):
+        """The velocity went from slip to stick, stick to slip, or reversed."""
+        v0, v1 = ctx.restrict(ctx.y_prev), ctx.restrict(ctx.y_iter)
+        tol = 64 * jnp.finfo(v1.dtype).eps * (1.0 + jnp.max(jnp.abs(v0), initial=0.0))
+        if self.isotropic:
+            stuck0, stuck1 = jnp.linalg.norm(v0) <= tol, jnp.linalg.norm(v1) <= tol
+            return (stuck0 != stuck1) | (jnp.dot(v0, v1) < 0)
+        mode = lambda v: jnp.where(jnp.abs(v) <= tol, 0, jnp.sign(v))
+        return jnp.any(mode(v0) != mode(v1))
+
+    @property
+    def has_switch_shift(self) -> bool:
+        return not self.isotropic
+
+    def switch_shift(self, ctx: ProjectionContext):
+        r"""Slip reversal inside the stage: the friction force per unit mass jumps from
+        $-c\,\operatorname{sign}(v^-)$ to $-c\,\operatorname{sign}(v^+)$ at
+        $\tau = -v_0/\dot v^-$, $\dot v^- = F - c\,\operatorname{sign}(v_0)$ ($F$ from
+        `ctx.rate`, $c$ at the stage start).
+
+        - The velocity changes sign between the stage's start and its solution: the jump
+          $c(\operatorname{sign} v^+ - \operatorname{sign} v^-)\,\delta\tau$ shifts the
+          stage's base point.
+        - The stage ends stuck although the applied force exceeds the bound
+          ($|F| > c$, opposing $v_0$): the block sticks for this stage only and slips back
+          in the next one, whose start no longer carries $d\tau$ (a stuck velocity has no
+          sensitivity). The stage's result moves back along the post-reversal flow,
+          $-(F - c\,\operatorname{sign} F)\,\delta\tau$.
+
+        Stick to slip at a breakaway and slip to a lasting stick carry no term: the force
+        is continuous at a breakaway, and a lasting stick has no sensitivity to its
+        start. Isotropic friction: none (a 2-D velocity passes through zero only on a set
+        of measure zero)."""
+        v0, v1 = ctx.restrict(ctx.y_prev), ctx.restrict(ctx.y_iter)
+        dtype = v0.dtype
+        zero = jnp.zeros_like(v0)
+        if self.isotropic or ctx.rate is None:
+            return zero, zero, jnp.zeros((), bool)
+        start = eqx.tree_at(lambda c: c.y_iter, ctx, ctx.y_prev)
+        c = jnp.broadcast_to(jnp.maximum(resolve(self.bound, start, dtype), 0.0), v0.shape)
+        force = ctx.restrict(ctx.rate)
+        tol = 64 * jnp.finfo(dtype).eps * (1.0 + jnp.max(jnp.abs(v0), initial=0.0))
+        slipping = jnp.abs(v0) > tol
+        reversal = slipping & (v0 * v1 < 0) & (jnp.abs(v1) > tol)
+        transient = slipping & (jnp.abs(v1) <= tol) & (force * v0 < 0) & (jnp.abs(force) > c)
+        delta = switch_delay(v0, force - c * jnp.sign(v0), reversal | transient)
+        # A transient stick's base shift is the jump to the reversed slip (the stuck stage
+        # ignores it; a multistage scheme reads it for its earlier points).
+        after = jnp.where(reversal, jnp.sign(v1), jnp.sign(force))
+        base = jnp.where(reversal | transient, c * (after - jnp.sign(v0)) * delta, 0.0)
+        end = jnp.where(transient, -(force - c * jnp.sign(force)) * delta, 0.0)
+        return base, end, jnp.any(reversal | transient)
 
     def __call__(self, z, ctx: ProjectionContext):
         z = jnp.asarray(z)

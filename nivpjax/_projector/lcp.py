@@ -36,6 +36,10 @@ def lcp_solve(D, q):
     m = q.shape[0]
     diag = jnp.diagonal(D)
     p0 = jnp.maximum(0.0, -q / jnp.where(diag > 0, diag, 1.0))
+    if m == 1:
+        # One contact: p = max(0, -q/D) is the exact solution (D > 0); the iterations
+        # below would only confirm it (and, under vmap, run their fallback regardless).
+        return p0
 
     def cond(carry):
         k, _, changed = carry
@@ -52,19 +56,29 @@ def lcp_solve(D, q):
     _, p, _ = lax.while_loop(cond, body, (jnp.array(0), p0, jnp.array(True)))
     p = jnp.maximum(p, 0.0)
 
-    def pgs_sweep(p, _):
+    def pgs_sweep(p):
         def one(i, p):
             w_i = D[i] @ p + q[i]
             d_i = jnp.where(diag[i] > 0, diag[i], 1.0)
             return p.at[i].set(jnp.maximum(0.0, p[i] - w_i / d_i))
 
-        return lax.fori_loop(0, m, one, p), None
+        return lax.fori_loop(0, m, one, p)
 
+    # Projected Gauss-Seidel only while the active-set result is not exact (degenerate
+    # problems). A while loop rather than `lax.cond`: under vmap a cond runs both branches,
+    # i.e. all 50 m sweeps for every member; the loop stops once no member needs a sweep.
     scale = 1.0 + jnp.max(jnp.abs(q), initial=0.0)
-    needs_pgs = _lcp_residual(D, q, p) > 1e3 * jnp.finfo(q.dtype).eps * scale
-    p = lax.cond(
-        needs_pgs, lambda p: lax.scan(pgs_sweep, p, None, length=50 * m)[0], lambda p: p, p
-    )
+    tol = 1e3 * jnp.finfo(q.dtype).eps * scale
+
+    def pgs_cond(carry):
+        k, p = carry
+        return (k < 50 * m) & (_lcp_residual(D, q, p) > tol)
+
+    def pgs_body(carry):
+        k, p = carry
+        return k + 1, pgs_sweep(p)
+
+    _, p = lax.while_loop(pgs_cond, pgs_body, (jnp.array(0), p))
     return p
 
 

@@ -3,9 +3,13 @@
 from collections.abc import Callable
 from typing import Any
 
+import equinox as eqx
+import jax
 import jax.numpy as jnp
+import numpy as np
 
-from .base import AbstractProjector, ProjectionContext
+from .base import AbstractProjector, ProjectionContext, switch_delay
+from .predict import secant_crossing
 
 
 class EventLocated(AbstractProjector):
@@ -20,10 +24,20 @@ class EventLocated(AbstractProjector):
 
     Used by the relay, diode and saturation effects of scenes; wrap your own projectors the
     same way. `surface(t, y, args)` receives the full state.
+
+    `saltation=True` declares that the projected components (multipliers) jump across the
+    switch while the vector field is otherwise continuous, as a relay's selection
+    $w = \pm 1$ does: a stage that crosses the surface transversally (no sliding at its
+    end) then carries the event-time sensitivity (see `switch_shift`). Leave it `False`
+    when the multipliers are continuous across the switch (a diode with series
+    resistance, a saturation): the vector field has a kink there, not a jump, and no
+    first-order term is missing. The surface must then have one component per projected
+    component.
     """
 
     projector: AbstractProjector
     surface: Callable[[Any, Any, Any], Any]
+    saltation: bool = eqx.field(static=True, default=False)
 
     def validate(self, n: int) -> None:
         self.projector.validate(n)
@@ -37,12 +51,93 @@ class EventLocated(AbstractProjector):
     def impulsive(self, ctx: ProjectionContext):
         return self.projector.impulsive(ctx)
 
+    def impact(self, ctx: ProjectionContext):
+        return self.projector.impact(ctx)
+
+    def switched(self, ctx: ProjectionContext):
+        s0 = jnp.atleast_1d(self.surface(ctx.t - ctx.h, ctx.y_prev, ctx.args))
+        s1 = jnp.atleast_1d(self.surface(ctx.t, ctx.y_iter, ctx.args))
+        return jnp.any(s0 * s1 < 0) | self.projector.switched(ctx)
+
+    def next_event(self, ctx: ProjectionContext):
+        """The first zero of the switching function along the secant through its values at
+        the two ends of the attempt (inside the attempt if it changed sign, beyond it if it
+        approaches zero), or the wrapped projector's own prediction if earlier."""
+        s0 = jnp.atleast_1d(self.surface(ctx.t - ctx.h, ctx.y_prev, ctx.args))
+        s1 = jnp.atleast_1d(self.surface(ctx.t, ctx.y_iter, ctx.args))
+        dtype = ctx.y_iter.dtype
+        own = jnp.min(secant_crossing(s0.astype(dtype), s1.astype(dtype), ctx.h), initial=jnp.inf)
+        return jnp.minimum(own, self.projector.next_event(ctx))
+
     @property
     def has_event_time(self) -> bool:
         return self.projector.has_event_time
 
     def event_time(self, ctx: ProjectionContext):
         return self.projector.event_time(ctx)
+
+    @property
+    def has_switch_shift(self) -> bool:
+        return self.saltation or self.projector.has_switch_shift
+
+    def switch_shift(self, ctx: ProjectionContext):
+        r"""With `saltation`, for each surface component $s$ and its projected component
+        $w$ (the selection, e.g. a relay's $\pm 1$), switch time
+        $\tau = -s_0/\dot s^-$ with $\dot s^- = \partial_t s + \nabla s \cdot$
+        `ctx.rate` at the stage start:
+
+        - a crossing: $s$ changes sign between the stage start and its solution while
+          $w$ moves from one boundary point of its set to another (it stays put when
+          pushed further along its jump at both ends): the base shift $(w^- - w^+)\,
+          \delta\tau$;
+        - a transient landing: the stage ends on the surface ($s_1 = 0$ up to round-off,
+          $w$ inside its set) although the flow crosses it (on the far branch $w^+$, the
+          point of the set farthest along $w_1 - w^-$, $\dot s^+$ has the sign of
+          $\dot s^-$), so the next stage leaves on the far side and no longer carries
+          $d\tau$: the end shift $(w^+ - w^-)\,\kappa$ with
+          $\kappa = -\dot s^+ \delta\tau / (\dot s^+ - \dot s^-)$, which moves $s$ by
+          $-\dot s^+\,d\tau$ (the exact solution is $\dot s^+ (t - \tau)$ off the
+          surface).
+
+        Both are multiplier displacements, mapped through the vector field by the model.
+        Entry into a lasting sliding mode and exit from it carry no term (the state on the
+        surface does not depend on the entry time; the exit is tangential)."""
+        base, end, found = self.projector.switch_shift(ctx)
+        if not self.saltation or ctx.rate is None:
+            return base, end, found
+        t0 = ctx.t - ctx.h
+        dtype = ctx.y_prev.dtype
+
+        def surface(t, y):
+            return jnp.atleast_1d(self.surface(t, y, ctx.args)).astype(dtype)
+
+        s0, sdot = jax.jvp(surface, (t0, ctx.y_prev), (jnp.ones_like(t0), ctx.rate))
+        s1 = surface(ctx.t, ctx.y_iter)
+        w0, w1 = ctx.restrict(ctx.y_prev), ctx.restrict(ctx.y_iter)
+        jump = w1 - w0
+        settled = (self.projector(w1 + jump, ctx) == w1) & (self.projector(w0 - jump, ctx) == w0)
+        crossed = (s0 * s1 < 0) & (jump != 0) & settled
+        # Transient landing: the far branch, and the rate of s on it at the start.
+        far = self.projector(w0 + jnp.asarray(1e6, dtype) * jump, ctx)
+        y_far = ctx.y_prev if ctx.block is None else ctx.y_prev.at[np.asarray(ctx.block)].set(far)
+        tol = jnp.sqrt(jnp.finfo(dtype).eps) * (1.0 + jnp.abs(s0))
+        landed = (jnp.abs(s1) <= tol) & (jnp.abs(s0) > tol) & (jump != 0) & ~settled
+        if ctx.rate_at is None:
+            transient = jnp.zeros_like(landed)
+        else:
+            _, sdot_far = jax.jvp(surface, (t0, y_far), (jnp.ones_like(t0), ctx.rate_at(y_far)))
+            transient = landed & (sdot_far * sdot > 0)
+        delta = switch_delay(s0, sdot, crossed | transient)
+        # A transient landing's base shift is the jump to the far branch (the stage's
+        # pinned state ignores it; a multistage scheme reads it for its earlier points).
+        target = jnp.where(crossed, w1, far)
+        base = base - jnp.where(crossed | transient, (target - w0) * delta, 0.0)
+        # The landed state is pinned to the surface, while the flow leaves it on the far
+        # branch at the rate sdot_far from tau on: the multiplier displacement whose
+        # effect on s is -sdot_far * dtau (it moves the state along the jump f+ - f-).
+        gap = jnp.where(transient, sdot_far - sdot, 1.0)
+        end = end + jnp.where(transient, (far - w0) * (-sdot_far / gap) * delta, 0.0)
+        return base, end, found | jnp.any(crossed | transient)
 
     def violation(self, ctx: ProjectionContext):
         s0 = jnp.atleast_1d(self.surface(ctx.t - ctx.h, ctx.y_prev, ctx.args))

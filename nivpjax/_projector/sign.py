@@ -1,7 +1,7 @@
 import jax.numpy as jnp
 import numpy as np
 
-from .base import AbstractProjector, ProjectionContext
+from .base import AbstractProjector, ProjectionContext, face
 from .box import sign_resolvent_interval
 
 
@@ -67,3 +67,9 @@ class SignResolvent(AbstractProjector):
         w = np.asarray(self.w_index)
         tau = jnp.broadcast_to(ctx.rho, z.shape)[w] if self.tau is None else self.tau
         return z.at[w].set(sign_resolvent_interval(z[w], tau * z[s]))
+
+    def switched(self, ctx: ProjectionContext):
+        """A selection $w$ moved onto, off or between $\\pm 1$."""
+        w = np.asarray(self.w_index)
+        w0, w1 = ctx.restrict(ctx.y_prev)[w], ctx.restrict(ctx.y_iter)[w]
+        return jnp.any(face(w0, -1.0, 1.0) != face(w1, -1.0, 1.0))

@@ -189,3 +189,29 @@ class Scene(eqx.Module):
             equation_rows=self.equation_rows,
             **kwargs,
         )
+
+    def sweep(self, t0, t1, x0, args=None, *, multipliers=None, **kwargs):
+        """Solve a batch of members of the scene with [`nivpjax.solve_batched`][]: `x0` of
+        shape `(batch, n_states)` or `(n_states,)`, `args` leaves batched along
+        `args_axes` (default 0); `kwargs` (cost, chunk_size, devices, stepper, controller,
+        ...) are passed on. Returns the batched [`nivpjax.Solution`][] of the full state."""
+        from .._batched import solve_batched
+
+        x0 = np.asarray(x0)
+        if x0.shape[-1:] != (self.n_states,) or x0.ndim > 2:
+            raise ValueError(
+                f"`x0` must have shape (batch, {self.n_states}) or ({self.n_states},), got "
+                f"{x0.shape}."
+            )
+        y0 = np.stack([np.asarray(self.initial_state(x, multipliers)) for x in np.atleast_2d(x0)])
+        return solve_batched(
+            self.vector_field,
+            t0,
+            t1,
+            y0[0] if x0.ndim == 1 else y0,
+            args,
+            projector=self.projector,
+            mass_matrix=self.full_mass_matrix,
+            equation_rows=self.equation_rows,
+            **kwargs,
+        )

@@ -51,7 +51,7 @@ class Relay(AbstractEffect):
         return self.n
 
     def blocks(self, n_states, offset):
-        projector = EventLocated(Box(-1.0, 1.0), OnScene(self.switch, n_states))
+        projector = EventLocated(Box(-1.0, 1.0), OnScene(self.switch, n_states), saltation=True)
         return [(np.arange(offset, offset + self.n), projector)]
 
     def constraint(self, t, x, lam, args):

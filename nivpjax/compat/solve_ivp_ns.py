@@ -310,17 +310,19 @@ def solve_ivp_ns(
         throw=throw,
         progress=bool(verbose),
     )
-    sol = sol.trimmed()
-    t = np.asarray(sol.ts)
-    y = np.asarray(sol.ys)
-    h = np.asarray(sol.hs)
-    fk = np.asarray(sol.multipliers)[1:]
+    # Cut on the host: slicing device arrays to a data-dependent length would compile a new
+    # slice program for every step count (most of a repeated call's time).
+    rows = int(sol.n_accepted) + 1
+    t = np.asarray(sol.ts)[:rows]
+    y = np.asarray(sol.ys)[:rows]
+    h = np.asarray(sol.hs)[:rows]
+    fk = np.asarray(sol.multipliers)[1:rows]
     info = [
         (float(r), bool(s), int(i))
         for r, s, i in zip(
-            np.asarray(sol.residual_norms)[1:],
-            np.asarray(sol.nonlinear_success)[1:],
-            np.asarray(sol.iterations)[1:],
+            np.asarray(sol.residual_norms)[1:rows],
+            np.asarray(sol.nonlinear_success)[1:rows],
+            np.asarray(sol.iterations)[1:rows],
         )
     ]
     if not return_attempts:
@@ -329,13 +331,13 @@ def solve_ivp_ns(
     k = int(sol.n_accepted + sol.n_rejected)
     attempts = None
     if log is not None:
-        accepted = np.asarray(log.accepted[:k])
-        ok = np.asarray(log.nonlinear_success[:k])
+        accepted = np.asarray(log.accepted)[:k]
+        ok = np.asarray(log.nonlinear_success)[:k]
         attempts = {
-            "t": np.asarray(log.t[:k]),
-            "dt": np.asarray(log.h[:k]),
+            "t": np.asarray(log.t)[:k],
+            "dt": np.asarray(log.h)[:k],
             "accepted": accepted,
-            "error": np.asarray(log.error_norm[:k]),
+            "error": np.asarray(log.error_norm)[:k],
             "status": np.where(accepted, "accept", np.where(ok, "reject", "nonlinear_fail")),
         }
     return t, y, h, fk, info, attempts

@@ -1,0 +1,28 @@
+"""Landing steps just before predicted events, shared by the controllers."""
+
+import jax
+import jax.numpy as jnp
+
+from .base import StepInfo
+
+
+EVENT_SKIP = 1e-2
+
+
+def land_before_event(info: StepInfo, accept, ok, h_next, margin):
+    r"""Shorten the proposed step `h_next` so that it ends a relative `margin` short of the
+    event the projector predicts (`info.next_event`, measured from `info.t0`).
+
+    - After an acceptance the next step starts at `t0 + h`; after a rejection, at `t0`.
+    - A step that would start within `EVENT_SKIP` of its size from the event steps over it:
+      the event then sits at the start of the step, where the scheme resolves it.
+    - A rejected attempt that crossed the event is retried up to just before it (the
+      error-controlled factor judged the whole attempt, including the crossing).
+
+    No prediction (`inf`) leaves `h_next` unchanged; the result carries no gradient."""
+    to_event = info.next_event - jnp.where(accept, info.h, 0.0)
+    land = jax.lax.stop_gradient(to_event * (1 - margin))
+    coming = jnp.isfinite(to_event) & (to_event > EVENT_SKIP * h_next)
+    crossed = ~accept & ok & (info.next_event < info.h)
+    h_next = jnp.where(coming, jnp.minimum(h_next, land), h_next)
+    return jnp.where(crossed & coming, jnp.minimum(land, info.h), h_next)

@@ -1,0 +1,173 @@
+"""The compile cache at the solve boundary: run-time tolerances, closures of the same code
+with new constants, changed structures, and the fallback for closures that need concrete
+constants. Compilations are counted with JAX's own backend-compile event."""
+
+import contextlib
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import nivpjax as nj
+from nivpjax._solve import _solve_jit
+
+
+_COMPILE_EVENT = "/jax/core/compile/backend_compile_duration"
+_compiles = [0]
+
+
+def _listener(event, duration, **kwargs):
+    if event == _COMPILE_EVENT:
+        _compiles[0] += 1
+
+
+jax.monitoring.register_event_duration_secs_listener(_listener)
+
+
+@contextlib.contextmanager
+def count_compiles():
+    """Counts XLA compilations and traces of the solve program inside the block."""
+    out = {}
+    c0, t0 = _compiles[0], _solve_jit.cache_info().traces
+    yield out
+    out["xla"] = _compiles[0] - c0
+    out["traces"] = _solve_jit.cache_info().traces - t0
+
+
+def decay(k):
+    def f(t, y, args):
+        return -k * y
+
+    return f
+
+
+def growth(k):  # the same maths, other code: another structure
+    def f(t, y, args):
+        return k * y
+
+    return f
+
+
+Y0 = jnp.array([1.0, 0.5])
+
+
+def _solve(f, max_steps=256, **kw):
+    return nj.solve(f, 0.0, 1.0, Y0, stepper=nj.BackwardEuler(), max_steps=max_steps, **kw)
+
+
+def test_new_closure_same_structure_compiles_nothing():
+    sol1 = _solve(decay(1.0))  # may compile: first use of this structure
+    with count_compiles() as n:
+        sol2 = _solve(decay(2.0))
+        sol3 = _solve(decay(jnp.asarray(3.0)))  # a weakly typed array like the float
+    assert n == {"xla": 0, "traces": 0}
+    for sol, k in ((sol1, 1.0), (sol2, 2.0), (sol3, 3.0)):
+        np.testing.assert_allclose(sol.y_final, np.exp(-k) * np.asarray(Y0), rtol=5e-2)
+
+
+def test_changed_structure_compiles_once():
+    _solve(growth(0.5))
+    t_eval = np.linspace(0.0, 1.0, 3)
+    with count_compiles() as n:
+        _solve(decay(1.0), t_eval=t_eval)  # new: t_eval
+        _solve(decay(2.0), t_eval=t_eval)
+    assert n["traces"] == 1
+    assert n["xla"] == 1
+
+
+def test_tolerance_sweep_compiles_once():
+    f = decay(1.0)
+    controller = nj.PIDController(rtol=1e-2, atol=1e-4, h_max=0.5)
+    sols = [_solve(f, max_steps=1024, controller=controller)]
+    with count_compiles() as n:
+        for rtol, h_max in ((1e-3, 0.25), (1e-4, 0.1)):
+            controller = nj.PIDController(rtol=rtol, atol=1e-8, h_max=h_max)
+            sols.append(_solve(f, max_steps=1024, controller=controller))
+    assert n == {"xla": 0, "traces": 0}
+    steps = [int(s.n_accepted) for s in sols]
+    assert steps[0] < steps[1] < steps[2]  # tighter tolerances take more steps
+    errors = [float(jnp.max(jnp.abs(s.y_final - jnp.exp(-1.0) * Y0))) for s in sols]
+    assert errors[2] < errors[1] < errors[0]
+    assert max(float(jnp.max(s.hs)) for s in sols[2:]) <= 0.1 * (1 + 1e-12)
+
+
+def test_tolerances_are_arrays_and_still_checked():
+    c = nj.PIDController(rtol=1e-4, h_min=1e-9)
+    assert isinstance(c.rtol, jax.Array) and c.rtol.weak_type
+    assert c.h_max is None
+    with pytest.raises(ValueError, match="rtol"):
+        nj.PIDController(rtol=-1.0)
+    with pytest.raises(ValueError, match="h_min"):
+        nj.PIDController(h_min=1.0, h_max=0.5)
+
+
+def test_vmapped_tolerances():
+    f = decay(1.0)
+
+    def final(rtol):
+        controller = nj.PIDController(rtol=rtol, atol=1e-8)
+        return _solve(f, controller=controller, throw=False).n_accepted
+
+    steps = jax.vmap(final)(jnp.array([1e-2, 1e-5]))
+    assert steps[0] < steps[1]
+
+
+def test_closure_needing_concrete_constant_falls_back():
+    def clipped(k):
+        if k > 1.0:  # Python control flow: k must stay concrete
+            k = 1.0
+
+        def f(t, y, args):
+            if k > 0.75:
+                return -k * y
+            return -2.0 * k * y
+
+        return f
+
+    info0 = _solve_jit.cache_info()
+    sol_a = _solve(clipped(0.5))
+    sol_b = _solve(clipped(2.0))
+    assert _solve_jit.cache_info().fallbacks == info0.fallbacks + 1
+    np.testing.assert_allclose(sol_a.y_final, np.exp(-1.0) * np.asarray(Y0), rtol=5e-2)
+    np.testing.assert_allclose(sol_b.y_final, np.exp(-1.0) * np.asarray(Y0), rtol=5e-2)
+    sol_c = _solve(clipped(0.8))  # same code, another constant: a new static program
+    np.testing.assert_allclose(sol_c.y_final, np.exp(-0.8) * np.asarray(Y0), rtol=5e-2)
+
+
+def test_scene_rebuilt_in_a_function_compiles_once():
+    def scene(c):
+        def dynamics(t, x, args, multipliers):
+            return jnp.array([x[1], -x[0] - c * x[1]])
+
+        return nj.Scene(dynamics, n_states=2)
+
+    x0 = jnp.array([1.0, 0.0])
+    kw = dict(stepper=nj.BackwardEuler(), controller=nj.ConstantStepSize(), h0=0.1)
+    scene(0.1).solve(0.0, 1.0, x0, **kw)
+    with count_compiles() as n:
+        a = scene(0.2).solve(0.0, 1.0, x0, **kw)
+        b = scene(0.0).solve(0.0, 1.0, x0, **kw)
+    assert n == {"xla": 0, "traces": 0}
+    assert not np.allclose(a.y_final, b.y_final)
+
+
+def test_compat_rebuilt_callbacks_compile_once():
+    from nivpjax.compat import solve_ivp_ns
+
+    def run(k):
+        def fun(t, y):
+            return jnp.array([y[1], -k * y[0]])
+
+        return solve_ivp_ns(
+            fun, (0.0, 0.5), [1.0, 0.0], method="backward_euler", h0=0.05, adaptive=False
+        )
+
+    run(1.0)
+    with count_compiles() as n:
+        t, y, *_ = run(4.0)
+    assert n == {"xla": 0, "traces": 0}
+    # backward Euler on x'' = -4 x: the first step solved by hand
+    h = 0.05
+    A = np.array([[1.0, -h], [4.0 * h, 1.0]])
+    np.testing.assert_allclose(y[1], np.linalg.solve(A, [1.0, 0.0]), rtol=1e-8)

@@ -1,0 +1,146 @@
+"""PolicyController: the PID-equivalent policy reproduces PID; jit, vmap and grad."""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import nivpjax as nv
+from nivpjax import scenes
+
+
+STEPPER = nv.EmbeddedBETR()
+ORDER = STEPPER.error_order
+TOL = dict(rtol=1e-4, atol=1e-7)
+
+
+def _ball(controller, args, t1=1.2, **kw):
+    scene, x0, _ = scenes.bouncing_ball(restitution=0.7)
+    return scene.solve(
+        0.0, t1, x0, args, stepper=STEPPER, controller=controller, max_steps=800, **kw
+    )
+
+
+@eqx.filter_jit
+def _ball_jit(controller, args, t1):
+    return _ball(controller, args, t1, throw=False)
+
+
+def _args(e=0.7):
+    return {"e": jnp.asarray(e), "g": jnp.asarray(9.81)}
+
+
+def test_integral_policy_reproduces_pid():
+    pid = _ball_jit(nv.PIDController(**TOL), _args(), 1.2)
+    pol = _ball_jit(nv.PolicyController(nv.IntegralPolicy(ORDER), **TOL), _args(), 1.2)
+    assert pid.result == nv.RESULTS.successful
+    assert int(pid.n_rejected) > 0  # the rails (no growth after a rejection) are exercised
+    assert int(pol.n_accepted) == int(pid.n_accepted)
+    assert int(pol.n_rejected) == int(pid.n_rejected)
+    k = int(pid.n_accepted) + 1
+    np.testing.assert_allclose(pol.ts[:k], pid.ts[:k], rtol=1e-12, atol=1e-14)
+    np.testing.assert_allclose(pol.ys[:k], pid.ys[:k], rtol=1e-10, atol=1e-12)
+
+
+def test_smooth_problem_reproduces_pid():
+    def f(t, y, args):
+        return jnp.stack([y[1], -args * y[0]])
+
+    y0 = jnp.array([1.0, 0.0])
+    pid = nv.solve(f, 0.0, 3.0, y0, 4.0, controller=nv.PIDController(**TOL), stepper=STEPPER)
+    pol = nv.solve(
+        f,
+        0.0,
+        3.0,
+        y0,
+        4.0,
+        controller=nv.PolicyController(nv.IntegralPolicy(ORDER), **TOL),
+        stepper=STEPPER,
+    )
+    k = int(pid.n_accepted) + 1
+    assert int(pol.n_accepted) + 1 == k
+    np.testing.assert_allclose(pol.ts[:k], pid.ts[:k], rtol=1e-12)
+
+
+def _mlp_controller(seed=0):
+    size = nv.StepFeatures().size
+    mlp = eqx.nn.MLP(size, 1, 8, 1, key=jax.random.PRNGKey(seed))
+    return nv.PolicyController(mlp, **TOL)
+
+
+def test_features_finite_when_h_zero():
+    feats = nv.StepFeatures()
+    memory = feats.init(0.0, 1.0, jnp.float64)
+    stats = nv.StepStats(jnp.array(0), jnp.array(0.0), nv.RESULTS.successful)
+    info = nv.StepInfo(
+        t0=jnp.array(1.0),
+        h=jnp.array(0.0),
+        t1=jnp.array(1.0),
+        y0=jnp.zeros(2),
+        y1=jnp.array([jnp.nan, jnp.inf]),
+        y_error=jnp.zeros(2),
+        error_order=2,
+        stats=stats,
+        error_mask=jnp.ones(2, bool),
+        violation=jnp.array(0.0),
+        next_event=jnp.array(jnp.inf),
+    )
+
+    def total(h):
+        info2 = eqx.tree_at(lambda i: i.h, info, h)
+        return jnp.sum(feats(info2, jnp.array(0.0), memory))
+
+    phi = feats(info, jnp.array(jnp.inf), memory)
+    assert phi.shape == (feats.size,)
+    assert np.all(np.isfinite(phi))
+    assert np.isfinite(jax.grad(total)(jnp.array(0.0)))
+
+
+def test_jit_vmap_grad_with_early_finishers():
+    controller = _mlp_controller()
+    # Members end at different times: the short ones keep running the body with h = 0.
+    t1s = jnp.array([0.3, 0.8, 1.2])
+    es = jnp.array([0.6, 0.7, 0.8])
+
+    def loss(e, t1):
+        sol = _ball(controller, {"e": e, "g": jnp.asarray(9.81)}, t1, throw=False)
+        return sol.y_final[0] + sol.y_final[1] ** 2
+
+    values, grads = jax.jit(jax.vmap(jax.value_and_grad(loss)))(es, t1s)
+    single = [float(jax.jit(loss)(e, t)) for e, t in zip(es, t1s)]
+    np.testing.assert_allclose(values, single, rtol=1e-10)
+    assert np.all(np.isfinite(grads))
+    # Before the first impact (t ~ 0.45) the state does not depend on e.
+    assert float(grads[0]) == 0.0
+    # After bounces it does: compare with central differences at a moderate step
+    # (the accepted mesh is piecewise constant in e).
+    eps = 1e-4
+    fd = (jax.jit(loss)(es[2] + eps, t1s[2]) - jax.jit(loss)(es[2] - eps, t1s[2])) / (2 * eps)
+    np.testing.assert_allclose(grads[2], fd, rtol=0.05)
+
+
+def test_policy_accepts_option_and_pathwise_gradient():
+    size = nv.StepFeatures().size
+    mlp = eqx.nn.MLP(size, 2, 8, 1, key=jax.random.PRNGKey(1))
+    controller = nv.PolicyController(mlp, policy_accepts=True, differentiable_factor=True, **TOL)
+    params, static = eqx.partition(controller, eqx.is_inexact_array)
+
+    def loss(p):
+        c = eqx.combine(p, static)
+        sol = _ball(c, _args(), 0.3, throw=False)
+        return sol.y_final[0]
+
+    value, grads = jax.jit(jax.value_and_grad(loss))(params)
+    assert np.isfinite(float(value))
+    leaves = jax.tree.leaves(grads)
+    assert all(np.all(np.isfinite(g)) for g in leaves)
+
+
+def test_bad_input():
+    with pytest.raises(TypeError, match="policy"):
+        nv.PolicyController(3.0)
+    with pytest.raises(ValueError, match="factormin"):
+        nv.PolicyController(nv.IntegralPolicy(2), factormin=2.0)
+    with pytest.raises(TypeError, match="features"):
+        nv.PolicyController(nv.IntegralPolicy(2), features="x")
