@@ -109,6 +109,7 @@ class _Splitter:
                 "fn",
                 f.__code__,
                 _Identity(f.__globals__),
+                self.globals_key(f),
                 f.__name__,
                 tuple(cells),
                 defaults,
@@ -116,6 +117,41 @@ class _Splitter:
             )
         finally:
             self._path.discard(id(f))
+
+    def globals_key(self, f: types.FunctionType):
+        """The module-level names `f` reads, with their values: a program traced with one
+        value of a global must not serve a call made after the global changed (`jax.jit`
+        retraces a new function object; so must we). Floats and other hashables key by
+        value, arrays and other unhashables by identity, functions by identity and,
+        recursively, by the globals they read."""
+        items = []
+        for name in sorted(_global_names(f.__code__)):
+            if name not in f.__globals__:
+                continue
+            value = f.__globals__[name]
+            if isinstance(value, types.ModuleType):
+                items.append((name, ("module", value.__name__)))
+            elif isinstance(value, types.FunctionType):
+                inner = () if id(value) in self._path else self._guarded_globals(value)
+                items.append((name, ("gfn", _Identity(value), inner)))
+            else:
+                items.append((name, _static(value)))
+        return tuple(items)
+
+    def _guarded_globals(self, f):
+        self._path.add(id(f))
+        try:
+            return self.globals_key(f)
+        finally:
+            self._path.discard(id(f))
+
+
+def _global_names(code: types.CodeType) -> set:
+    names = set(code.co_names)
+    for const in code.co_consts:
+        if isinstance(const, types.CodeType):
+            names |= _global_names(const)
+    return names
 
 
 def _rebuild_tree(spec, dynamic):
@@ -131,7 +167,7 @@ def _rebuild_leaf(spec, dynamic):
         return spec[1]
     if kind == "id":
         return spec[1].obj
-    _, code, globals_, name, cells, defaults, kwdefaults = spec
+    _, code, globals_, _, name, cells, defaults, kwdefaults = spec
     closure = tuple(
         types.CellType() if c is None else types.CellType(_rebuild_tree(c, dynamic)) for c in cells
     )

@@ -120,7 +120,10 @@ class EventLocated(AbstractProjector):
         # Transient landing: the far branch, and the rate of s on it at the start.
         far = self.projector(w0 + jnp.asarray(1e6, dtype) * jump, ctx)
         y_far = ctx.y_prev if ctx.block is None else ctx.y_prev.at[np.asarray(ctx.block)].set(far)
-        tol = jnp.sqrt(jnp.finfo(dtype).eps) * (1.0 + jnp.abs(s0))
+        # A landing puts s at round-off of the surface (the projection pins it there); a
+        # sqrt(eps) band would also count a step that merely ends close to the surface,
+        # and would then shift it as if it had landed.
+        tol = 64 * jnp.finfo(dtype).eps * (1.0 + jnp.abs(s0))
         landed = (jnp.abs(s1) <= tol) & (jnp.abs(s0) > tol) & (jump != 0) & ~settled
         if ctx.rate_at is None:
             transient = jnp.zeros_like(landed)
