@@ -314,14 +314,24 @@ def run(
     return finish(final, t1)
 
 
-def interpolate(sol: Solution, t_eval):
-    """Piecewise-linear interpolation of the accepted states at `t_eval`; NaN after the
-    point where the solve stopped (a failed run is flagged in `result`)."""
+def interpolate(sol: Solution, t_eval, model: Model | None = None, args=None):
+    r"""Piecewise-linear interpolation of the accepted states at `t_eval`; NaN after the
+    point where the solve stopped (a failed run is flagged in `result`).
+
+    With `model`, a step across which a switch happens (`Model.switch_jump`) interpolates
+    from its start moved by the saltation term $(f^- - f^+)\,d\tau$, zero in value: the
+    interpolant's derivatives then follow the post-switch branch, as the step's end does.
+    Without it, a long step that begins just before a switch (event prediction lands
+    there) would blend the pre- and post-switch sensitivities across the whole step."""
     k = sol.n_accepted
     idx = jnp.searchsorted(sol.ts, t_eval, side="right") - 1
     idx = jnp.clip(idx, 0, jnp.maximum(k - 1, 0))
     ta, tb = sol.ts[idx], sol.ts[jnp.minimum(idx + 1, k)]
     ya, yb = sol.ys[idx], sol.ys[jnp.minimum(idx + 1, k)]
+    if model is not None and model.projector.has_switch_shift:
+        jump = jax.vmap(lambda t0, y0, t1, y1: model.switch_jump(t0, y0, t1, y1, args))
+        safe_tb = jnp.where(tb > ta, tb, ta + 1.0)  # a finished run's padding
+        ya = ya + jnp.where((tb > ta)[:, None], jump(ta, ya, safe_tb, yb), 0.0)
     span = jnp.where(tb > ta, tb - ta, 1.0)
     w = jnp.clip((t_eval - ta) / span, 0.0, 1.0)[:, None]
     y = ya + w * (yb - ya)

@@ -206,7 +206,7 @@ def _solve_impl(
         sol = eqx.tree_at(
             lambda s: (s.t_eval, s.y_eval),
             sol,
-            (t_eval, interpolate(sol, t_eval)),
+            (t_eval, interpolate(sol, t_eval, model, args)),
             is_leaf=lambda x: x is None,
         )
     if throw_inside:
