@@ -217,6 +217,22 @@ class Model(eqx.Module):
             return jnp.zeros_like(y0)
         return self._switch_shifts(t0, y0, t1, args)(y1)[0]
 
+    def start_state(self, t0, h, y0, args):
+        """`y0` with the right-limit selections at the start of a step of size `h` (see
+        `AbstractProjector.start_selection`; unchanged where the projector has none), the
+        rate there (what explicit parts of stages and embedded estimates read), and the
+        local error of a switch moved to the start from `skipped` later, `skipped` times
+        the jump of the rate (zero without one), for the steppers' estimates."""
+        f0 = self.f(t0, y0, args)
+        if not self.projector.has_start_selection:
+            return y0, f0, jnp.zeros_like(y0)
+        ctx = self._context(t0 + h, h, y0, y0, args, rate_at=lambda y: self._rate(t0, y, args))
+        selection, skipped = self.projector.start_selection(ctx)
+        y0_start = jnp.where(self.algebraic, selection, y0)
+        f0_start = self.f(t0, y0_start, args)
+        error = jax.lax.stop_gradient(skipped * self.to_state(f0 - f0_start))
+        return y0_start, f0_start, error
+
     def consistent_initial_state(self, solver, t0, h, y0, args):
         r"""Solve the algebraic rows and the projection at $t_0$ with the differential
         states held fixed (a stage with $\theta = 0$): multipliers get their consistent

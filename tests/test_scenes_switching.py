@@ -69,7 +69,12 @@ def test_relay_reaching_time(relay_run):
     (a, f, x0, T), (sol, ts, x, m) = relay_run
     x = x[:, 0]
     k = np.flatnonzero(np.abs(x) < 1e-15)[0]  # the first accepted state on the surface
-    assert ts[k - 1] < T <= ts[k]
+    # The landing brackets the reaching time up to the free phase's global error: x is
+    # off by -1.36e-5 (a0.5) and -5.1e-6 (a0.8) just before it (measured with Bathe's
+    # embedded estimate at rtol 1e-6, within the free-motion bound 3e-5), so the numerical
+    # trajectory reaches x = 0 earlier by that over |x'|: 9.9e-6 and 3.7e-6. A strict
+    # T <= ts[k] held only for a global error >= 0 there.
+    assert ts[k - 1] < T + 2e-5 and T - 2e-5 <= ts[k]
     # First-order extrapolation from the last state before reaching, with the exact slope
     # -1 + d(t): the numerical reaching time. Measured |error| <= 6.5e-6.
     t_reach = ts[k - 1] + x[k - 1] / (1 - a * np.sin(2 * np.pi * f * ts[k - 1]))
@@ -78,7 +83,8 @@ def test_relay_reaching_time(relay_run):
 
 def test_relay_free_motion(relay_run):
     (a, f, x0, T), (sol, ts, x, m) = relay_run
-    before = ts < T
+    # Before the numerical landing (up to 1e-5 before T, see test_relay_reaching_time).
+    before = ts < ts[np.flatnonzero(np.abs(x[:, 0]) < 1e-15)[0]]
     # Measured max error 9.3e-6 (a0.5) and 6.3e-6 (a0.8) at rtol 1e-6.
     np.testing.assert_allclose(x[before, 0], _relay_free(ts[before], a, f, x0), rtol=0, atol=3e-5)
     # The selection is the relay's value sign(x) = 1 on every accepted state before reaching

@@ -168,6 +168,28 @@ class AbstractProjector(eqx.Module):
         zero = jnp.zeros_like(ctx.rho)
         return zero, zero, jnp.zeros((), bool)
 
+    @property
+    def has_start_selection(self) -> bool:
+        """Whether `start_selection` can change a selection (static: a model without one
+        skips that work at the start of each step)."""
+        return False
+
+    def start_selection(
+        self, ctx: ProjectionContext
+    ) -> tuple[Float[Array, " m"], Float[Array, ""]]:
+        r"""The right-limit selection at the start of a step, from `ctx.y_prev` (restricted
+        to the projector's components), with `ctx.t - ctx.h` the step's start and
+        `ctx.rate_at` the rate of the differential rows there as a function of the full
+        state. A step that lands on a switching surface ends with the multiplier that made
+        it land (an average over that step), not the selection the flow takes from there
+        (a sliding mode's equivalent control); a scheme that reads the rate at the start
+        of the next step (the trapezoidal rule, Bathe's first stage, an embedded
+        estimate) would apply that average once more. A projector may also move a switch
+        that the step reaches very early to its start. Returns `(selection, skipped)`:
+        `skipped` the time from the step's start to the switch so moved (0 if none; the
+        model charges it to the error estimate). Default: `ctx.y_prev` unchanged, 0."""
+        return ctx.restrict(ctx.y_prev), jnp.zeros((), ctx.y_prev.dtype)
+
     def impulsive(self, ctx: ProjectionContext) -> Bool[Array, ""]:
         """Whether the stage from `ctx.y_prev` to `ctx.y_iter` contained an impulse (a jump
         of the state, e.g. an impact). Multistep stages (Bathe's backward difference) must

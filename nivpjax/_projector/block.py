@@ -125,6 +125,22 @@ class BlockProjector(AbstractProjector):
         return jnp.where(found, tau, 0.0), found
 
     @property
+    def has_start_selection(self) -> bool:
+        return any(projector.has_start_selection for _, projector in self.blocks)
+
+    def start_selection(self, ctx: ProjectionContext):
+        """Each block's start selection on its own components."""
+        out = ctx.restrict(ctx.y_prev)
+        skipped = jnp.zeros((), ctx.y_prev.dtype)
+        for indices, projector in self.blocks:
+            if projector.has_start_selection:
+                sub = self._sub(ctx, indices, ctx.y_prev.shape)
+                w, skipped_b = projector.start_selection(sub)
+                out = out.at[np.asarray(indices)].set(w)
+                skipped = jnp.maximum(skipped, skipped_b)
+        return out, skipped
+
+    @property
     def has_switch_shift(self) -> bool:
         return any(projector.has_switch_shift for _, projector in self.blocks)
 

@@ -12,6 +12,11 @@ from .base import AbstractProjector, ProjectionContext, switch_delay
 from .predict import secant_crossing
 
 
+# A step that starts this fraction of its size or less before a switch treats the switch as
+# at its start (the controller's `EVENT_SKIP`: it steps over events that close).
+START_SKIP = 1e-2
+
+
 class EventLocated(AbstractProjector):
     r"""`projector` unchanged, plus event location on a switching surface $s(t, y) = 0$.
 
@@ -141,6 +146,56 @@ class EventLocated(AbstractProjector):
         gap = jnp.where(transient, sdot_far - sdot, 1.0)
         end = end + jnp.where(transient, (far - w0) * (-sdot_far / gap) * delta, 0.0)
         return base, end, found | jnp.any(crossed | transient)
+
+    @property
+    def has_start_selection(self) -> bool:
+        return self.saltation
+
+    def start_selection(self, ctx: ProjectionContext):
+        r"""With `saltation`, a selection whose surface component is at the surface at the
+        step's start ($|s_0|$ at round-off), or reaches it within `START_SKIP` of the step
+        along the start rate (a step that starts just short of a switch, as the controller
+        lands them), is replaced by the one that keeps $\dot s = 0$ there (the equivalent
+        control, one Newton step on $\dot s(w) = 0$, exact for a vector field affine in
+        $w$), projected onto its set: if it lies outside, the flow crosses or leaves the
+        surface and the projection gives the selection of the side it goes to. Inside a
+        sliding mode the previous step's multiplier already is that selection (the step
+        changes nothing); after a landing step it is an average over that step, which,
+        used as the start rate, pushes the next step off the surface (or makes it report a
+        multiplier of about twice the equivalent control). Components off the surface, or
+        whose $\dot s$ does not depend on their selection, keep their value. Returns the
+        selection and the time to the surface it skips (0 on the surface)."""
+        w0 = ctx.restrict(ctx.y_prev)
+        zero = jnp.zeros((), ctx.y_prev.dtype)
+        if not self.saltation or ctx.rate_at is None or ctx.block is None:
+            return w0, zero
+        t0 = ctx.t - ctx.h
+        dtype = ctx.y_prev.dtype
+        idx = np.asarray(ctx.block)
+
+        def surface(t, y):
+            return jnp.atleast_1d(self.surface(t, y, ctx.args)).astype(dtype)
+
+        def sdot(w):
+            y = ctx.y_prev.at[idx].set(w)
+            return jax.jvp(surface, (t0, y), (jnp.ones_like(t0), ctx.rate_at(y)))[1]
+
+        s0 = surface(t0, ctx.y_prev)
+        eps = jnp.finfo(dtype).eps
+        rate, jac = sdot(w0), jax.jacfwd(sdot)(w0)
+        tol = 64 * eps * (1.0 + jnp.max(jnp.abs(ctx.y_prev)))
+        approaching = s0 * rate < 0
+        delay = jnp.where(approaching, -s0 / jnp.where(approaching, rate, 1.0), jnp.inf)
+        at = jnp.abs(s0) <= tol
+        near = at | (delay <= START_SKIP * ctx.h)
+        scale = jnp.max(jnp.abs(jac), initial=0.0)
+        on = near & (jnp.abs(jnp.diagonal(jac)) > eps * scale)
+        pair = on[:, None] & on[None, :]
+        eye = jnp.eye(w0.size, dtype=dtype)
+        step = jnp.linalg.solve(jnp.where(pair, jac, eye), jnp.where(on, rate, 0.0))
+        w = jnp.where(on, self.projector(w0 - step, ctx), w0)
+        skipped = jnp.max(jnp.where(on & ~at, delay, 0.0), initial=0.0)
+        return w, jax.lax.stop_gradient(skipped)
 
     def violation(self, ctx: ProjectionContext):
         s0 = jnp.atleast_1d(self.surface(ctx.t - ctx.h, ctx.y_prev, ctx.args))

@@ -58,27 +58,14 @@ def theta_error(model, theta, t0, h, y0, y1, f0, f1, reaction, args):
     return e + (1 - theta) * h * defect
 
 
-def backward_euler_error(model, t0, h, y0, y1, f0, f1, args):
-    r"""Backward Euler's estimate $\tfrac h2 (f_1 - \tilde f_0) + \tau\,(f_0 - \tilde f_0)$.
-
-    The scheme never evaluates $f$ at the start, so the start rate is free to choose:
-    $\tilde f_0 = f(t_0, \tilde y_0)$ takes the multipliers (selections) of the step's end,
-    which is the right-limit rate when the step starts on a switching surface or inside a
-    sliding mode (where the previous step's multiplier is an average over that step, not
-    the selection at $t_0$). A selection that changes face at a time $\tau$ inside the
-    step (the first zero of a switching function, from `Model.next_event`) was applied
-    by the scheme over $[t_0, t_0 + \tau]$ too early: the error $\tau (f_0 - \tilde f_0)$.
-    It is what rejects a step that reaches a sliding set too early."""
-    if not model.has_algebraic:
-        return 0.5 * h * (f1 - f0)
+def late_switch_error(model, t0, h, y0, y1, f0, args):
+    r"""`(f0_end, e)`: $\tilde f_0 = f(t_0, \tilde y_0)$, the start rate with the
+    multipliers (selections) of the step's end, and the error of a backward Euler stage that
+    applied them from the start although the selection changes face only at a time $\tau$
+    inside the step (the first zero of a switching function, from `Model.next_event`):
+    $e = \tau\,(f_0 - \tilde f_0)$, in the units of $f$. It is what rejects a step that
+    crosses a switching surface, or lands on one, too early."""
     f0_end = model.f(t0, jnp.where(model.algebraic, y1, y0), args)
-    # Neither start rate is right everywhere: f0_end is off by O(h) inside a sliding mode
-    # (the end's equivalent control applied at t0: an estimate h^2/2 |w'| where the state's
-    # true error is zero), f0 by O(1) after a landing step (whose multiplier is an average
-    # over that step). Each is exact where the other fails; per component, the smaller
-    # difference is the right-limit one.
-    d_end, d_start = f1 - f0_end, f1 - f0
-    base = jnp.where(jnp.abs(d_start) < jnp.abs(d_end), d_start, d_end)
     tau = model.next_event(t0 + h, h, y0, y1, args)
     # A step that lands on the surface has its event at the end, tau = h up to the
     # rounding of the secant (measured one ulp above h for a step jumping onto a sliding
@@ -86,7 +73,29 @@ def backward_euler_error(model, t0, h, y0, y1, f0, f1, args):
     # time off by 8e-4 at rtol 1e-5). Where the selection did not change, f0 = f0_end and
     # the term vanishes anyway.
     tau = jnp.where(tau <= h * (1 + jnp.sqrt(jnp.finfo(y1.dtype).eps)), jnp.minimum(tau, h), 0.0)
-    return 0.5 * h * base + tau * (f0 - f0_end)
+    return f0_end, tau * (f0 - f0_end)
+
+
+def backward_euler_error(model, t0, h, y0, y1, f0, f1, args):
+    r"""Backward Euler's estimate $\tfrac h2 (f_1 - \tilde f_0) + \tau\,(f_0 - \tilde f_0)$.
+
+    The scheme never evaluates $f$ at the start, so the start rate is free to choose:
+    $\tilde f_0 = f(t_0, \tilde y_0)$ takes the multipliers (selections) of the step's end,
+    which is the right-limit rate when the step starts on a switching surface or inside a
+    sliding mode (where the previous step's multiplier is an average over that step, not
+    the selection at $t_0$). A selection that changes face inside the step was applied too
+    early: the second term, see `late_switch_error`."""
+    if not model.has_algebraic:
+        return 0.5 * h * (f1 - f0)
+    f0_end, late = late_switch_error(model, t0, h, y0, y1, f0, args)
+    # Neither start rate is right everywhere: f0_end is off by O(h) inside a sliding mode
+    # (the end's equivalent control applied at t0: an estimate h^2/2 |w'| where the state's
+    # true error is zero), f0 by O(1) after a landing step (whose multiplier is an average
+    # over that step). Each is exact where the other fails; per component, the smaller
+    # difference is the right-limit one.
+    d_end, d_start = f1 - f0_end, f1 - f0
+    base = jnp.where(jnp.abs(d_start) < jnp.abs(d_end), d_start, d_end)
+    return 0.5 * h * base + late
 
 
 class _AbstractTheta(AbstractStepper):
@@ -104,7 +113,7 @@ class _AbstractTheta(AbstractStepper):
     def step(self, model, t0, h, y0, args):
         t1 = t0 + h
         y0, impact_error = model.apply_impacts(t0, h, y0, args)
-        f0 = model.f(t0, y0, args)
+        y0, f0, start_error = model.start_state(t0, h, y0, args)
         f_explicit = None if self.theta == 1.0 else f0
         sol, multipliers = model.solve_stage(
             self.solver, t1, h, y0, f_explicit, self.theta, y0, y0, args
@@ -115,7 +124,7 @@ class _AbstractTheta(AbstractStepper):
         e = theta_error(model, self.theta, t0, h, y0, y1, f0, f1, reaction, args)
         return StepOutput(
             y1=y1,
-            y_error=model.to_state(e) + impact_error,
+            y_error=model.to_state(e) + impact_error + start_error,
             multipliers=multipliers,
             stats=stats_of(sol),
         )
