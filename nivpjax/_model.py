@@ -132,9 +132,17 @@ class Model(eqx.Module):
             alg_rho = jnp.where(self.equation_rows, self.tau, alg_rho)
         rho = jnp.where(alg, alg_rho, h_eff).astype(guess.dtype)
 
+        start_rate = self._start_rate(t_end, h_eff, y_prev, args)
+
         def project(z, y, rho_used):
             ctx = ProjectionContext(
-                t=t_end, h=h_eff, y_prev=y_prev, y_iter=y, rho=rho_used, args=args
+                t=t_end,
+                h=h_eff,
+                y_prev=y_prev,
+                y_iter=y,
+                rho=rho_used,
+                args=args,
+                start_rate=start_rate,
             )
             return self.projector(z, ctx)
 
@@ -242,10 +250,26 @@ class Model(eqx.Module):
             solver, t0, h, y0, None, 0.0, y0, y0, args, event_sensitivity=False
         )[0]
 
+    def _start_rate(self, t, h, y0, args):
+        # The rate at the start `(t - h, y0)` of a stage ending at `t`, for projectors with
+        # events (a contact's normal acceleration tells a graze from an impact); it only
+        # decides active sets, so it carries no gradient.
+        if not self.has_impulses:
+            return None
+        return jax.lax.stop_gradient(self._rate(t - h, y0, args))
+
     def _context(self, t, h, y0, y1, args, rate=None, rate_at=None):
         rho = jnp.full_like(y1, h)
         return ProjectionContext(
-            t=t, h=h, y_prev=y0, y_iter=y1, rho=rho, args=args, rate=rate, rate_at=rate_at
+            t=t,
+            h=h,
+            y_prev=y0,
+            y_iter=y1,
+            rho=rho,
+            args=args,
+            rate=rate,
+            rate_at=rate_at,
+            start_rate=self._start_rate(t, h, y0, args),
         )
 
     def violation(self, t1, h, y0, y1, args):

@@ -33,6 +33,10 @@ class ProjectionContext(eqx.Module):
     - `rate_at`: for `switch_shift` only, the rate of the differential rows at the stage
       start as a function of the full state (to evaluate it on another branch of a
       switch: other multiplier values); `None` otherwise.
+    - `start_rate`: the rate of the differential rows at the stage start, $f(t - h,
+      y_{\\text{prev}})$ in state units, for projectors that predict events from the start
+      (a contact's normal acceleration tells a graze from an impact); set by the model for
+      projectors with events (`has_event_time`), `None` otherwise.
     """
 
     t: Float[Array, ""]
@@ -44,6 +48,7 @@ class ProjectionContext(eqx.Module):
     block: tuple[int, ...] | None = eqx.field(static=True, default=None)
     rate: Float[Array, " n"] | None = None
     rate_at: Callable[[Array], Array] | None = None
+    start_rate: Float[Array, " n"] | None = None
 
     def restrict(self, v):
         """The components of a full-state vector `v` that belong to this block."""

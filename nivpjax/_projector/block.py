@@ -86,6 +86,7 @@ class BlockProjector(AbstractProjector):
             block=indices,
             rate=ctx.rate,
             rate_at=ctx.rate_at,
+            start_rate=ctx.start_rate,
         )
 
     def violation(self, ctx: ProjectionContext):
