@@ -244,7 +244,11 @@ def test_slider_stick_slip(slider_driven):
     assert [m for _, m in switches] == [0, 1, 0, 1, 0, 1, 0, 1]
     assert abs(switches[1][0] - 6.0) < 1e-12
     err = np.max(np.maximum(np.abs(ys[:, 0] - s_ref), np.abs(ys[:, 1] - v_ref)))
-    assert err < 5e-4  # measured 1.3e-4
+    # Measured 7.4e-4 with Bathe's embedded estimate (1.3e-4 with the former Richardson
+    # estimate). The v error at the breakaway (t = 6.004) is 1.1e-6, about rtol; the
+    # slip-weakening slip phase then amplifies it ~500x by t = 10.8. The embedded estimate
+    # lets more of it through than Richardson did (known, see the integrators page).
+    assert err < 1.5e-3
     # Each switch of the reference lies in the step where the numerical solution switches
     # (stick: v = 0 to round-off).
     stuck = np.abs(ys[:, 1]) < 1e-12
