@@ -311,8 +311,14 @@ def test_block_on_plane(block):
         # The cone's multipliers are states: lambda_n = g, lambda_t = -mu g v_hat while
         # sliding, lambda_t = 0 at rest; the block never leaves the plane.
         lam = multipliers["lam"]
-        assert np.allclose(lam[1:, 0], G, rtol=0, atol=1e-9)
-        assert np.allclose(lam[sliding, 1:], friction, rtol=0, atol=1e-9)
+        # The start (consistent multipliers give lambda = 0 for the cone; the first attempt
+        # is rejected down to h = 4.9e-9) leaves steps whose lambda is recovered to round-off
+        # of the state over h: measured |lambda_n - g| 1.0e-7, 1.2e-8, 8.8e-10, 8.1e-11 at h
+        # 4.9e-9, 4.4e-8, 4.4e-7, 4.4e-6, i.e. about 5e-16 / h. Allow 1e-9 + 1e-15 / h.
+        hs = np.asarray(sol.hs)[: ts.size]
+        atol = 1e-9 + 1e-15 / np.where(hs > 0, hs, np.inf)
+        assert np.all(np.abs(lam[1:, 0] - G) <= atol[1:])
+        assert np.all(np.abs(lam[sliding, 1:] - friction) <= atol[sliding][:, None])
         assert np.allclose(lam[k + 1 :, 1:], 0.0, rtol=0, atol=1e-9)
         assert np.max(np.abs(x[:, 2])) < 1e-12 and np.max(np.abs(x[:, 5])) < 1e-12
 
