@@ -143,7 +143,7 @@ def solve_batched(
     counts run together, and `chunk_size` runs the ordered batch in chunks of that many
     members, one after another, through one compiled program. Each chunk is sharded along
     the batch axis over `devices` (default: every device JAX sees) with a 1-D
-    [`jax.sharding.Mesh`][] named `"batch"`; results are identical to an unsharded run.
+    `jax.sharding.Mesh` named `"batch"`; results are identical to an unsharded run.
 
     **Arguments:**
 

@@ -5,8 +5,9 @@
 2. Served on 127.0.0.1 and opened in headless Debian Chromium with every host other than
    127.0.0.1 unresolvable, the maths renders: after the page's JavaScript ran, every
    `arithmatex` element holds rendered KaTeX and none holds a KaTeX error.
-3. The API pages document every public name of `nivpjax` (and the public functions of its
-   public submodules).
+3. The API pages document every public name of `nivpjax` and the public functions and
+   classes of its public submodules and subpackages (`scenes`, `compat`, `learn`,
+   `learn.tasks`, `learn.pretrained`, `rl`).
 4. Screenshots of the main pages are written to the output folder (default
    `site-screenshots/`) for a human to look at.
 
@@ -135,24 +136,52 @@ def check_links(site):
     return problems
 
 
+# Public subpackages that `import nivpjax` does not import itself (each needs its own
+# optional dependencies: optax for `learn`, gymnasium for `rl`).
+SUBPACKAGES = (
+    "nivpjax.compat",
+    "nivpjax.learn",
+    "nivpjax.learn.tasks",
+    "nivpjax.learn.pretrained",
+    "nivpjax.rl",
+)
+
+
+def _module_names(path, module, seen):
+    """`path.f` for the public functions and classes defined in `module`, and recursively in
+    its public submodules."""
+    out = set()
+    seen.add(module.__name__)
+    for sub, member in vars(module).items():
+        if sub.startswith("_"):
+            continue
+        if isinstance(member, types.ModuleType):
+            if member.__name__.startswith(module.__name__ + ".") and member.__name__ not in seen:
+                out |= _module_names(f"{path}.{sub}", member, seen)
+            continue
+        defined_here = getattr(member, "__module__", "") or ""
+        if defined_here.startswith(module.__name__) and (
+            inspect.isclass(member) or callable(member)
+        ):
+            out.add(f"{path}.{sub}")
+    return out
+
+
 def public_names():
     """`nivpjax.X` for every public name, plus `nivpjax.mod.f` for the public functions and
-    classes defined in each public submodule."""
+    classes defined in each public submodule (`nivpjax.scenes`, `nivpjax.compat`,
+    `nivpjax.learn` with `learn.tasks` and `learn.pretrained`, `nivpjax.rl`)."""
     sys.path.insert(0, os.getcwd())
     nivpjax = importlib.import_module("nivpjax")
-    importlib.import_module("nivpjax.compat")
+    for name in SUBPACKAGES:
+        importlib.import_module(name)
     names = set(getattr(nivpjax, "__all__", ()))
     names |= {n for n in vars(nivpjax) if not n.startswith("_")}
     out = set()
     for name in sorted(names):
         obj = getattr(nivpjax, name)
         if isinstance(obj, types.ModuleType):
-            for sub, member in vars(obj).items():
-                defined_here = getattr(member, "__module__", "") or ""
-                if sub.startswith("_") or not defined_here.startswith(obj.__name__):
-                    continue
-                if inspect.isclass(member) or callable(member):
-                    out.add(f"nivpjax.{name}.{sub}")
+            out |= _module_names(f"nivpjax.{name}", obj, {nivpjax.__name__})
         else:
             out.add(f"nivpjax.{name}")
     return out

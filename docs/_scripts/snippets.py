@@ -2,8 +2,10 @@
 
 Every fenced block opened with three backticks and `python` in a page under docs/ is a
 snippet. The snippets of one page run in order in one shared namespace, as a reader would
-type them. A block preceded by the line `<!-- snippet: skip -->` is not run (use it only for
-code that cannot run in CI, and say why next to it).
+type them. A block preceded by the line `<!-- snippet: skip: why -->` (or the bare
+`<!-- snippet: skip -->`) is not run: use it only for code too slow or too invasive for CI
+(a training run, a long fit), say why in the marker, and list the page in
+`tests/test_docs.py`'s `SKIPPED`.
 """
 
 import pathlib
@@ -11,7 +13,7 @@ import re
 
 
 DOCS = pathlib.Path(__file__).resolve().parents[1]
-SKIP_MARK = "<!-- snippet: skip -->"
+SKIP_MARK = re.compile(r"^<!--\s*snippet:\s*skip(?::.*?)?\s*-->$")
 _FENCE = re.compile(r"^(?P<indent>[ ]*)(?P<fence>`{3,}|~{3,})\s*(?P<lang>[\w+-]*)")
 
 
@@ -33,7 +35,7 @@ def blocks(path):
         i += 1
         if lang in ("python", "py"):
             previous = next((ln.strip() for ln in reversed(lines[: start - 1]) if ln.strip()), "")
-            out.append((start + 1, "\n".join(body) + "\n", previous != SKIP_MARK))
+            out.append((start + 1, "\n".join(body) + "\n", not SKIP_MARK.match(previous)))
     return out
 
 
