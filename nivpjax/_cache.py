@@ -319,6 +319,7 @@ def enable_persistent_cache(path: str, min_compile_time_secs: float = 0.0):
     """
     import os
 
+    path = os.path.abspath(os.path.expanduser(os.fspath(path)))
     os.makedirs(path, exist_ok=True)
     jax.config.update("jax_compilation_cache_dir", str(path))
     jax.config.update("jax_persistent_cache_min_compile_time_secs", float(min_compile_time_secs))

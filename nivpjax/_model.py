@@ -238,7 +238,13 @@ class Model(eqx.Module):
         selection, skipped = self.projector.start_selection(ctx)
         y0_start = jnp.where(self.algebraic, selection, y0)
         f0_start = self.f(t0, y0_start, args)
-        error = jax.lax.stop_gradient(skipped * self.to_state(f0 - f0_start))
+        jump = self.to_state(f0 - f0_start)
+        error = jax.lax.stop_gradient(skipped * jump)
+        # A switch moved to the start from `skipped` later: the effective start is
+        # y0 + skipped (f^- - f^+); in value that is the error above, in derivatives it is
+        # the saltation term (f^- - f^+) d tau, which a switch inside the step would carry.
+        delta = skipped - jax.lax.stop_gradient(skipped)
+        y0_start = jnp.where(self.algebraic, y0_start, y0_start + jump * delta)
         return y0_start, f0_start, error
 
     def consistent_initial_state(self, solver, t0, h, y0, args):

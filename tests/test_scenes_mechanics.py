@@ -255,7 +255,9 @@ def test_slider_stick_slip(slider_driven):
     change = np.flatnonzero(stuck[1:] != stuck[:-1])
     assert change.size == len(switches) - 1
     for i, (t_switch, _) in zip(change, switches[1:]):
-        assert _bracket_distance(t_switch, ts[i], ts[i + 1]) < 1e-3  # measured 0
+        # Measured 0 with Richardson estimates; 6.4e-3 for the stick at 12.23 with the
+        # embedded estimate (the slip-weakening slip amplifies the step errors, see above).
+        assert _bracket_distance(t_switch, ts[i], ts[i + 1]) < 1e-2
     # In the stick the friction force balances the spring, within the static bound.
     spring = p["k"] * (p["V"] * ts - ys[:, 0])
     inner = stuck & np.roll(stuck, 1)

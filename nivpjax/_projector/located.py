@@ -194,8 +194,11 @@ class EventLocated(AbstractProjector):
         eye = jnp.eye(w0.size, dtype=dtype)
         step = jnp.linalg.solve(jnp.where(pair, jac, eye), jnp.where(on, rate, 0.0))
         w = jnp.where(on, self.projector(w0 - step, ctx), w0)
+        # The skipped time keeps its derivative (d tau = -d s0 / sdot): the model moves the
+        # start along the jump of the rate by it (zero in value), the saltation term of the
+        # switch moved to the start.
         skipped = jnp.max(jnp.where(on & ~at, delay, 0.0), initial=0.0)
-        return w, jax.lax.stop_gradient(skipped)
+        return w, skipped
 
     def violation(self, ctx: ProjectionContext):
         s0 = jnp.atleast_1d(self.surface(ctx.t - ctx.h, ctx.y_prev, ctx.args))
