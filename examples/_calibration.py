@@ -1,6 +1,28 @@
-"""Shared pieces of the calibration examples: noise, the report and the figure."""
+"""Shared pieces of the calibration examples: the observed solve, noise, the report and
+the figure."""
 
 import numpy as np
+
+import nivpjax as nj
+
+
+def observe(scene, t1, x0, args, times, **controller):
+    """The scene's states at `times`: the solve every example differentiates (Bathe, PID at
+    rtol 1e-6 / atol 1e-9 plus `controller` options, forward-mode adjoint for the
+    Levenberg-Marquardt Jacobian, failures left to `fit` through the result code)."""
+    sol = scene.solve(
+        0.0,
+        t1,
+        x0,
+        args,
+        stepper=nj.Bathe(),
+        controller=nj.PIDController(rtol=1e-6, atol=1e-9, **controller),
+        t_eval=times,
+        max_steps=4096,
+        adjoint="forward",
+        throw=False,
+    )
+    return sol.y_eval
 
 
 def noisy(values, sigma, seed=0):

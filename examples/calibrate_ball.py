@@ -20,7 +20,7 @@ import time  # noqa: E402
 import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
-from _calibration import figure, noisy, report  # noqa: E402
+from _calibration import figure, noisy, observe, report  # noqa: E402
 from _references_mechanics import ball_state, output_path  # noqa: E402
 
 import nivpjax as nj  # noqa: E402
@@ -35,19 +35,7 @@ scene, x0, args = nj.scenes.bouncing_ball(height=1.0)
 
 
 def heights(params, times):
-    sol = scene.solve(
-        0.0,
-        3.0,
-        x0,
-        dict(args, e=params["e"]),
-        stepper=nj.Bathe(),
-        controller=nj.PIDController(rtol=1e-6, atol=1e-9, h_max=0.02),
-        t_eval=times,
-        max_steps=4096,
-        adjoint="forward",
-        throw=False,
-    )
-    return sol.y_eval[:, 0]
+    return observe(scene, 3.0, x0, dict(args, e=params["e"]), times, h_max=0.02)[:, 0]
 
 
 def residuals(params, data):

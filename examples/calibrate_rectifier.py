@@ -25,7 +25,7 @@ import time  # noqa: E402
 import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
-from _calibration import figure, noisy, report  # noqa: E402
+from _calibration import figure, noisy, observe, report  # noqa: E402
 from _references_switching import RectifierReference, output_path  # noqa: E402
 
 import nivpjax as nj  # noqa: E402
@@ -42,19 +42,7 @@ scene, x0, args = nj.scenes.half_wave_rectifier()
 
 def voltage(params, times):
     a = dict(args, C=params["C_mF"] * 1e-3, R_L=params["R_L_kohm"] * 1e3)
-    sol = scene.solve(
-        0.0,
-        T1,
-        x0,
-        a,
-        stepper=nj.Bathe(),
-        controller=nj.PIDController(rtol=1e-6, atol=1e-9),
-        t_eval=times,
-        max_steps=4096,
-        adjoint="forward",
-        throw=False,
-    )
-    return sol.y_eval[:, 0]
+    return observe(scene, T1, x0, a, times)[:, 0]
 
 
 def residuals(params, data):

@@ -28,7 +28,7 @@ import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 import optimistix as optx  # noqa: E402
-from _calibration import figure, noisy, report  # noqa: E402
+from _calibration import figure, noisy, observe, report  # noqa: E402
 from _references_mechanics import output_path, slider_event_driven  # noqa: E402
 
 import nivpjax as nj  # noqa: E402
@@ -44,19 +44,7 @@ scene, x0, args = nj.scenes.spring_slider(velocity=0.0, drive_velocity=FIXED["V"
 
 
 def slip(params, times):
-    sol = scene.solve(
-        0.0,
-        12.0,
-        x0,
-        dict(args, **params),
-        stepper=nj.Bathe(),
-        controller=nj.PIDController(rtol=1e-6, atol=1e-9),
-        t_eval=times,
-        max_steps=4096,
-        adjoint="forward",
-        throw=False,
-    )
-    return sol.y_eval[:, 0]
+    return observe(scene, 12.0, x0, dict(args, **params), times)[:, 0]
 
 
 def residuals(params, data):

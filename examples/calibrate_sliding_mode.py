@@ -30,7 +30,7 @@ import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 import optimistix as optx  # noqa: E402
-from _calibration import figure, noisy, report  # noqa: E402
+from _calibration import figure, noisy, observe, report  # noqa: E402
 from _references_switching import output_path, super_twisting_reference  # noqa: E402
 
 import nivpjax as nj  # noqa: E402
@@ -46,19 +46,7 @@ SIGMA = 0.002
 
 
 def states(params, times):
-    sol = scene.solve(
-        0.0,
-        T1,
-        x0,
-        dict(args, **params),
-        stepper=nj.Bathe(),
-        controller=nj.PIDController(rtol=1e-6, atol=1e-9),
-        t_eval=times,
-        max_steps=4096,
-        adjoint="forward",
-        throw=False,
-    )
-    return sol.y_eval[:, :2]
+    return observe(scene, T1, x0, dict(args, **params), times)[:, :2]
 
 
 def residuals(params, data):
