@@ -65,21 +65,13 @@ def _cases():
     g = _load("test_event_gradients")
     import nivpjax as nj
 
-    def fd(fn, q, eps):
-        q = np.asarray(q, float)
-        cols = [(fn(q + eps * e) - fn(q - eps * e)) / (2 * eps) for e in np.eye(q.size)]
-        return np.stack(cols, axis=-1)
+    fd = t._central_jacobian
 
     weak_q = np.array([t.WEAK["mu_s"], t.WEAK["mu_k"], t.WEAK["Dc"]])
-    x0, b, T = -0.5, 1.5, 1.0
-    tau = -x0 / (1 + b)
-    crossing = np.array(
-        [
-            (b - 1) / (b + 1),
-            (T - tau) - (b - 1) * x0 / (1 + b) ** 2,
-            (b - 1) / (1 + b) * (1 - np.cos(tau)) + (np.cos(tau) - np.cos(T)),
-        ]
-    )
+    # The relay crossing as in its test: at a = 0 the solution is piecewise linear and the
+    # error control does not resolve d/da (see the test), so a = 0.3.
+    x0, b, a, T = -0.5, 1.5, 0.3, 1.0
+    _, crossing = t._relay_crossing_exact(x0, b, a, T)
     t_e = np.arcsin(1 / 1.5)
     plastic_p = jnp.array([0.2, 9.81, 19.62])
     ball_p = jnp.array([0.8, 9.81])
@@ -102,7 +94,7 @@ def _cases():
             lambda r: t._weakening_jac(jnp.asarray(weak_q), r),
             fd(t._weakening_exact, weak_q, 1e-5),
         ),
-        "relay crossing": (lambda r: t._relay_jac(jnp.array([x0, b, 0.0]), T, r), crossing),
+        "relay crossing": (lambda r: t._relay_jac(jnp.array([x0, b, a]), T, r), crossing),
         "relay sliding": (
             lambda r: t._relay_jac(jnp.array([0.1, 0.0, 1.5]), 2.0, r),
             np.array([0.0, 2.0 - t_e, np.cos(t_e) - np.cos(2.0)]),
