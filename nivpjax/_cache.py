@@ -21,6 +21,7 @@ arguments.
 """
 
 import collections
+import contextlib
 import functools
 import threading
 import types
@@ -92,9 +93,17 @@ class _Splitter:
             return self.function(x)
         return _static(x)
 
-    def function(self, f: types.FunctionType):
+    @contextlib.contextmanager
+    def _visiting(self, f):
+        # Functions being keyed, so that recursion through closures and globals stops.
         self._path.add(id(f))
         try:
+            yield
+        finally:
+            self._path.discard(id(f))
+
+    def function(self, f: types.FunctionType):
+        with self._visiting(f):
             cells = []
             for cell in f.__closure__ or ():
                 try:
@@ -115,8 +124,6 @@ class _Splitter:
                 defaults,
                 kwdefaults,
             )
-        finally:
-            self._path.discard(id(f))
 
     def globals_key(self, f: types.FunctionType):
         """The module-level names `f` reads, with their values: a program traced with one
@@ -125,33 +132,32 @@ class _Splitter:
         value, arrays and other unhashables by identity, functions by identity and,
         recursively, by the globals they read."""
         items = []
-        for name in sorted(_global_names(f.__code__)):
+        for name in _global_names(f.__code__):
             if name not in f.__globals__:
                 continue
             value = f.__globals__[name]
             if isinstance(value, types.ModuleType):
                 items.append((name, ("module", value.__name__)))
             elif isinstance(value, types.FunctionType):
-                inner = () if id(value) in self._path else self._guarded_globals(value)
+                inner = ()
+                if id(value) not in self._path:
+                    with self._visiting(value):
+                        inner = self.globals_key(value)
                 items.append((name, ("gfn", _Identity(value), inner)))
             else:
                 items.append((name, _static(value)))
         return tuple(items)
 
-    def _guarded_globals(self, f):
-        self._path.add(id(f))
-        try:
-            return self.globals_key(f)
-        finally:
-            self._path.discard(id(f))
 
-
-def _global_names(code: types.CodeType) -> set:
+@functools.lru_cache(maxsize=1024)
+def _global_names(code: types.CodeType) -> tuple:
+    # The names `code` and its nested code objects may read as globals, sorted; computed
+    # once per code object (this runs on every cache lookup).
     names = set(code.co_names)
     for const in code.co_consts:
         if isinstance(const, types.CodeType):
-            names |= _global_names(const)
-    return names
+            names.update(_global_names(const))
+    return tuple(sorted(names))
 
 
 def _rebuild_tree(spec, dynamic):
