@@ -75,3 +75,18 @@ class AbstractController(eqx.Module):
 
     @abc.abstractmethod
     def adapt(self, info: StepInfo, state): ...
+
+
+def check_step_factors(controller) -> None:
+    """The step-factor options shared by the controllers: `factormin` in (0, 1],
+    `factormax` >= 1, `nonlinear_factor` in (0, 1)."""
+    if not 0 < controller.factormin <= 1:
+        raise ValueError(
+            f"`factormin` must satisfy 0 < factormin <= 1, got {controller.factormin}."
+        )
+    if not controller.factormax >= 1:
+        raise ValueError(f"`factormax` must be >= 1, got {controller.factormax}.")
+    if not 0 < controller.nonlinear_factor < 1:
+        raise ValueError(
+            f"`nonlinear_factor` must lie in (0, 1), got {controller.nonlinear_factor}."
+        )

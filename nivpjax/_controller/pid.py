@@ -8,7 +8,7 @@ import numpy as np
 from .._custom_types import FloatScalar, plain_int, runtime_float
 from .._norms import scaled_rms_norm
 from .._results import RESULTS
-from .base import AbstractController, StepInfo
+from .base import AbstractController, StepInfo, check_step_factors
 from .events import land_before_event
 
 
@@ -102,12 +102,7 @@ class PIDController(AbstractController):
             raise ValueError(
                 f"`h_min` must not exceed `h_max`, got h_min={self.h_min}, h_max={self.h_max}."
             )
-        if not 0 < self.factormin <= 1:
-            raise ValueError(f"`factormin` must satisfy 0 < factormin <= 1, got {self.factormin}.")
-        if not self.factormax >= 1:
-            raise ValueError(f"`factormax` must be >= 1, got {self.factormax}.")
-        if not 0 < self.nonlinear_factor < 1:
-            raise ValueError(f"`nonlinear_factor` must lie in (0, 1), got {self.nonlinear_factor}.")
+        check_step_factors(self)
         if self.error_order is not None and not (
             isinstance(self.error_order, int) and self.error_order >= 1
         ):

@@ -12,7 +12,7 @@ from jaxtyping import Array, Bool, Float
 
 from .._norms import scaled_rms_norm
 from .._results import RESULTS
-from .base import AbstractController, StepInfo
+from .base import AbstractController, StepInfo, check_step_factors
 from .events import land_before_event
 from .features import AbstractFeatures, FeatureMemory, StepFeatures
 from .pid import PIDController
@@ -100,12 +100,7 @@ class PolicyController(AbstractController):
                 raise TypeError(f"`{name}` must be a real number, got {value!r}.")
             if not (np.isfinite(value) and value > 0):
                 raise ValueError(f"`{name}` must be positive and finite, got {value}.")
-        if not 0 < self.factormin <= 1:
-            raise ValueError(f"`factormin` must satisfy 0 < factormin <= 1, got {self.factormin}.")
-        if not self.factormax >= 1:
-            raise ValueError(f"`factormax` must be >= 1, got {self.factormax}.")
-        if not 0 < self.nonlinear_factor < 1:
-            raise ValueError(f"`nonlinear_factor` must lie in (0, 1), got {self.nonlinear_factor}.")
+        check_step_factors(self)
 
     @property
     def feature_map(self) -> AbstractFeatures:
