@@ -117,15 +117,18 @@ class Model(eqx.Module):
         if event_sensitivity and self.projector.has_switch_shift:
             switch = self._switch_shifts(t_end - h_eff, y_prev, t_end, args)
 
-        def reaction(y, base):
+        explicit = self._explicit_rate(t_end, h_eff, y_prev, f_explicit, args, event_sensitivity)
+
+        def reaction(y, base, tangent=False):
             fy = self.f(t_end, y, args)
             diff = self.mass_times(y - base) / h_eff - theta * fy
             if f_explicit is not None:
-                diff = diff - (1 - theta) * f_explicit
+                diff = diff - (1 - theta) * (explicit(y) if tangent else f_explicit)
             return jnp.where(alg, -fy, diff)
 
-        def residual(y):
-            return reaction(y, y_base if switch is None else y_base + switch(y)[0])
+        def residual(y, tangent=False):
+            base = y_base if switch is None else y_base + switch(y)[0]
+            return reaction(y, base, tangent)
 
         alg_rho = self.tau / h_eff
         if self.equation_rows is not None:
@@ -134,7 +137,7 @@ class Model(eqx.Module):
 
         start_rate = self._start_rate(t_end, h_eff, y_prev, args)
 
-        def project(z, y, rho_used):
+        def project(z, y, rho_used, tangent=False):
             ctx = ProjectionContext(
                 t=t_end,
                 h=h_eff,
@@ -143,10 +146,15 @@ class Model(eqx.Module):
                 rho=rho_used,
                 args=args,
                 start_rate=start_rate,
+                tangent=tangent,
             )
             return self.projector(z, ctx)
 
-        sol = solver.solve(residual, project, rho, guess)
+        tangent = (
+            lambda y: residual(y, tangent=True),
+            lambda z, y, rho_used: project(z, y, rho_used, tangent=True),
+        )
+        sol = solver.solve(residual, project, rho, guess, tangent)
         multipliers = reaction(sol.value, y_base)
         if delta is not None:
             value = sol.value - self._rate(t_end, sol.value, args) * delta
@@ -159,6 +167,24 @@ class Model(eqx.Module):
             frozen = jnp.where(alg & found, jax.lax.stop_gradient(sol.value), sol.value)
             sol = eqx.tree_at(lambda s: s.value, sol, frozen + end)
         return sol, multipliers
+
+    def _explicit_rate(self, t_end, h, y_prev, f_explicit, args, event_sensitivity):
+        # The explicit start rate of a stage as a function of its iterate, for the stage's
+        # linearisation: `f_explicit` in value; where a kink was crossed early in the stage
+        # (`early_kinks`), its multipliers' derivatives are the iterate's (the branch the
+        # flow takes from just after the start) instead of the start's own (the branch it
+        # left: a diode's current tracking the source, as it did before turning off).
+        if f_explicit is None or not (event_sensitivity and self.projector.has_kinks):
+            return lambda y: f_explicit
+        sg = jax.lax.stop_gradient
+
+        def explicit(y):
+            early = self.projector.early_kinks(self._context(t_end, h, y_prev, y, args))
+            move = jnp.where(early, (y - sg(y)) - (y_prev - sg(y_prev)), 0.0)
+            field = lambda u: self.f(t_end - h, u, args)  # noqa: E731
+            return f_explicit + jax.jvp(field, (sg(y_prev),), (move,))[1]
+
+        return explicit
 
     def apply_impacts(self, t0, h, y0, args):
         r"""The state after the impulses the projector applies at the start of a step of

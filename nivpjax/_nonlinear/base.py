@@ -116,7 +116,14 @@ class AbstractNonlinearSolver(eqx.Module):
     def _iterate(self, residual: Residual, project: Project, rho, y0, rtol, atol):
         """Return `(y, (iterations, history))` with float diagnostics."""
 
-    def solve(self, residual: Residual, project: Project, rho, y0) -> NonlinearSolution:
+    def solve(
+        self,
+        residual: Residual,
+        project: Project,
+        rho,
+        y0,
+        tangent: tuple[Residual, Project] | None = None,
+    ) -> NonlinearSolution:
         """Solve $y = P(y - \\rho R(y); y)$ from the initial guess `y0`.
 
         **Arguments:**
@@ -126,11 +133,17 @@ class AbstractNonlinearSolver(eqx.Module):
           scaling `rho` actually used to form `z` (proximal maps need it).
         - `rho`: positive scaling, a scalar or one value per component.
         - `y0`: the initial guess.
+        - `tangent`: `(residual, project)` as the implicit function theorem linearises
+          the stage at its solution: equal to the first two in value, they may pick
+          another element of the generalised Jacobian at a kink (and cost work the
+          iteration does not need); the first two if `None`. The components the
+          projector moves are returned as `project`'s projection of the solution, so they
+          carry `project`'s element on top of the solution's derivative.
         """
         y0 = jnp.asarray(y0)
         rho = jnp.broadcast_to(jnp.asarray(rho, y0.dtype), y0.shape)
         rtol, atol = effective_tolerances(self.rtol, self.atol, y0.dtype)
-        G = natural_map(residual, project, rho)
+        G = natural_map(*((residual, project) if tangent is None else tangent), rho)
 
         def _solve(_, guess):
             # Closes over the problem: custom_root ignores tangents of `_solve`'s constants,

@@ -37,6 +37,11 @@ class ProjectionContext(eqx.Module):
       y_{\\text{prev}})$ in state units, for projectors that predict events from the start
       (a contact's normal acceleration tells a graze from an impact); set by the model for
       projectors with events (`has_event_time`), `None` otherwise.
+    - `tangent`: `True` when the projector is evaluated to linearise a stage at its
+      solution (the element of the generalised Jacobian that derivatives use, through the
+      implicit function theorem), `False` during the nonlinear iteration. Projectors that
+      pick the derivative's element by where the stage switched read it; values must not
+      depend on it.
     """
 
     t: Float[Array, ""]
@@ -49,6 +54,7 @@ class ProjectionContext(eqx.Module):
     rate: Float[Array, " n"] | None = None
     rate_at: Callable[[Array], Array] | None = None
     start_rate: Float[Array, " n"] | None = None
+    tangent: bool = eqx.field(static=True, default=False)
 
     def restrict(self, v):
         """The components of a full-state vector `v` that belong to this block."""
@@ -194,6 +200,21 @@ class AbstractProjector(eqx.Module):
         `skipped` the time from the step's start to the switch so moved (0 if none; the
         model charges it to the error estimate). Default: `ctx.y_prev` unchanged, 0."""
         return ctx.restrict(ctx.y_prev), jnp.zeros((), ctx.y_prev.dtype)
+
+    @property
+    def has_kinks(self) -> bool:
+        """Whether `early_kinks` can report a crossing (static: a model without kinks
+        skips that work in each stage)."""
+        return False
+
+    def early_kinks(self, ctx: ProjectionContext) -> Bool[Array, " m"]:
+        r"""Which components (restricted to the projector's) switched branch at a kink of
+        the vector field (continuous multipliers, e.g. a diode turning off) in the first
+        half of the stage from `ctx.y_prev` to `ctx.y_iter`. A stage's explicit start rate
+        (the trapezoidal rule's $f_0$) then takes their multipliers' derivatives from the
+        stage's end: the branch the flow follows from just after the start. Default:
+        none."""
+        return jnp.zeros(ctx.restrict(ctx.y_prev).shape, bool)
 
     def impulsive(self, ctx: ProjectionContext) -> Bool[Array, ""]:
         """Whether the stage from `ctx.y_prev` to `ctx.y_iter` contained an impulse (a jump

@@ -87,6 +87,7 @@ class BlockProjector(AbstractProjector):
             rate=ctx.rate,
             rate_at=ctx.rate_at,
             start_rate=ctx.start_rate,
+            tangent=ctx.tangent,
         )
 
     def violation(self, ctx: ProjectionContext):
@@ -157,6 +158,19 @@ class BlockProjector(AbstractProjector):
                 end = end.at[idx].set(e)
                 found = found | found_b
         return base, end, found
+
+    @property
+    def has_kinks(self) -> bool:
+        return any(projector.has_kinks for _, projector in self.blocks)
+
+    def early_kinks(self, ctx: ProjectionContext):
+        """Each block's early kink crossings on its own components."""
+        out = jnp.zeros(ctx.restrict(ctx.y_prev).shape, bool)
+        for indices, projector in self.blocks:
+            if projector.has_kinks:
+                sub = self._sub(ctx, indices, ctx.y_iter.shape)
+                out = out.at[np.asarray(indices)].set(projector.early_kinks(sub))
+        return out
 
     def impulsive(self, ctx: ProjectionContext):
         out = jnp.zeros((), bool)
