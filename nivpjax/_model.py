@@ -127,7 +127,10 @@ class Model(eqx.Module):
             return jnp.where(alg, -fy, diff)
 
         def residual(y, tangent=False):
-            base = y_base if switch is None else y_base + switch(y)[0]
+            # The switch's base shift is zero in value and in its derivative with respect
+            # to the iterate (it scales d tau, which depends on the stage start only): the
+            # iteration does without it, the linearisation at the solution carries it.
+            base = y_base if (switch is None or not tangent) else y_base + switch(y)[0]
             return reaction(y, base, tangent)
 
         alg_rho = self.tau / h_eff

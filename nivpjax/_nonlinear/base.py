@@ -137,13 +137,15 @@ class AbstractNonlinearSolver(eqx.Module):
           the stage at its solution: equal to the first two in value, they may pick
           another element of the generalised Jacobian at a kink (and cost work the
           iteration does not need); the first two if `None`. The components the
-          projector moves are returned as `project`'s projection of the solution, so they
-          carry `project`'s element on top of the solution's derivative.
+          projector moves are returned as `project`'s projection of
+          $y - \\rho R_{\\text{tangent}}(y)$, so they carry `project`'s element on top
+          of the solution's derivative.
         """
         y0 = jnp.asarray(y0)
         rho = jnp.broadcast_to(jnp.asarray(rho, y0.dtype), y0.shape)
         rtol, atol = effective_tolerances(self.rtol, self.atol, y0.dtype)
-        G = natural_map(*((residual, project) if tangent is None else tangent), rho)
+        residual_t, project_t = (residual, project) if tangent is None else tangent
+        G = natural_map(residual_t, project_t, rho)
 
         def _solve(_, guess):
             # Closes over the problem: custom_root ignores tangents of `_solve`'s constants,
@@ -158,7 +160,7 @@ class AbstractNonlinearSolver(eqx.Module):
         # happens when the solve stopped unconverged with z inside the set. Free
         # components, and constrained ones whose iterate is in its set, keep the iterate,
         # which satisfies its own equations more exactly.
-        z = y - rho * residual(y)
+        z = y - rho * residual_t(y)
         p = project(z, y, rho)
         G_y = y - p
         outside = project(y, y, rho) != y
