@@ -9,6 +9,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float
 
 from ._projector import AbstractProjector, ProjectionContext
+from ._tangent import tangent_only
 
 
 class Model(eqx.Module):
@@ -153,22 +154,29 @@ class Model(eqx.Module):
             )
             return self.projector(z, ctx)
 
-        tangent = (
-            lambda y: residual(y, tangent=True),
-            lambda z, y, rho_used: project(z, y, rho_used, tangent=True),
-        )
+        tangent = None
+        if switch is not None or self.projector.has_kinks:
+            tangent = (
+                lambda y: residual(y, tangent=True),
+                lambda z, y, rho_used: project(z, y, rho_used, tangent=True),
+            )
         sol = solver.solve(residual, project, rho, guess, tangent)
         multipliers = reaction(sol.value, y_base)
         if delta is not None:
             value = sol.value - self._rate(t_end, sol.value, args) * delta
             sol = eqx.tree_at(lambda s: s.value, sol, value)
         if switch is not None:
-            _, end, found = switch(sol.value)
-            # Multipliers at a switch take no derivative: a relay's selection at a vertex
-            # has none, and a transient landing's is an artefact of the step (its value
-            # makes the state land), which an explicit stage after it must not read.
-            frozen = jnp.where(alg & found, jax.lax.stop_gradient(sol.value), sol.value)
-            sol = eqx.tree_at(lambda s: s.value, sol, frozen + end)
+
+            def correction(y):
+                # Multipliers at a switch take no derivative: a relay's selection at a
+                # vertex has none, and a transient landing's is an artefact of the step
+                # (its value makes the state land), which an explicit stage after it must
+                # not read. Zero in value, like the end shift.
+                _, end, found = switch(y)
+                return end - jnp.where(alg & found, y - jax.lax.stop_gradient(y), 0.0)
+
+            value = sol.value + tangent_only(correction, sol.value)
+            sol = eqx.tree_at(lambda s: s.value, sol, value)
         return sol, multipliers
 
     def _explicit_rate(self, t_end, h, y_prev, f_explicit, args, event_sensitivity):
@@ -252,7 +260,7 @@ class Model(eqx.Module):
         do (to first order)."""
         if not self.projector.has_switch_shift:
             return jnp.zeros_like(y0)
-        return self._switch_shifts(t0, y0, t1, args)(y1)[0]
+        return tangent_only(lambda y: self._switch_shifts(t0, y0, t1, args)(y)[0], y1)
 
     def start_state(self, t0, h, y0, args):
         """`y0` with the right-limit selections at the start of a step of size `h` (see

@@ -13,6 +13,7 @@ from jax import lax
 from jaxtyping import Array, Float, Int
 
 from .._results import RESULTS
+from .._tangent import tangent_only
 
 
 Residual = Callable[[Array], Array]
@@ -160,7 +161,12 @@ class AbstractNonlinearSolver(eqx.Module):
         # happens when the solve stopped unconverged with z inside the set. Free
         # components, and constrained ones whose iterate is in its set, keep the iterate,
         # which satisfies its own equations more exactly.
-        z = y - rho * residual_t(y)
+        # The tangent residual equals the plain one in value: only its derivative is
+        # needed here, and a solve that is not differentiated skips it.
+        if tangent is None:
+            z = y - rho * residual(y)
+        else:
+            z = y - rho * (residual(y) + tangent_only(lambda v: residual_t(v) - residual(v), y))
         p = project(z, y, rho)
         G_y = y - p
         outside = project(y, y, rho) != y
