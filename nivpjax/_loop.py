@@ -315,25 +315,62 @@ def run(
 
 
 def interpolate(sol: Solution, t_eval, model: Model | None = None, args=None):
-    r"""Piecewise-linear interpolation of the accepted states at `t_eval`; NaN after the
-    point where the solve stopped (a failed run is flagged in `result`).
+    r"""The solution at `t_eval` from the accepted states; NaN after the point where the
+    solve stopped (a failed run is flagged in `result`).
 
-    With `model`, a step across which a switch happens (`Model.switch_jump`) interpolates
-    from its start moved by the saltation term $(f^- - f^+)\,d\tau$, zero in value: the
-    interpolant's derivatives then follow the post-switch branch, as the step's end does.
-    Without it, a long step that begins just before a switch (event prediction lands
-    there) would blend the pre- and post-switch sensitivities across the whole step."""
+    Without `model`: piecewise linear. With it, each step is interpolated as the steppers
+    start it: from the state after the impacts closing at its start
+    (`Model.apply_impacts`), with the right-limit selections there (`Model.start_state`),
+    by the cubic Hermite interpolant of the two end states and rates on differential rows
+    (exact for a ball's parabola, whose steps event prediction makes long: the linear
+    interpolant was off by $g h^2/8$, 0.47 m mid-flight on a drop from 1 m), linearly on
+    algebraic rows (multipliers). The end rates are those of the vector field shifted by
+    a constant so that their mean is the chord's slope: reactions that the vector field
+    does not contain (a resting contact's force) act as a constant over the step.
+
+    A step across which a switch happens (`Model.switch_jump`) interpolates from its start
+    moved by the saltation term $(f^- - f^+)\,d\tau$, zero in value: the interpolant's
+    derivatives then follow the post-switch branch, as the step's end does. Without it, a
+    long step that begins just before a switch (event prediction lands there) would blend
+    the pre- and post-switch sensitivities across the whole step."""
     k = sol.n_accepted
     idx = jnp.searchsorted(sol.ts, t_eval, side="right") - 1
     idx = jnp.clip(idx, 0, jnp.maximum(k - 1, 0))
     ta, tb = sol.ts[idx], sol.ts[jnp.minimum(idx + 1, k)]
     ya, yb = sol.ys[idx], sol.ys[jnp.minimum(idx + 1, k)]
-    if model is not None and model.projector.has_switch_shift:
-        jump = jax.vmap(lambda t0, y0, t1, y1: model.switch_jump(t0, y0, t1, y1, args))
-        safe_tb = jnp.where(tb > ta, tb, ta + 1.0)  # a finished run's padding
-        ya = ya + jnp.where((tb > ta)[:, None], jump(ta, ya, safe_tb, yb), 0.0)
     span = jnp.where(tb > ta, tb - ta, 1.0)
     w = jnp.clip((t_eval - ta) / span, 0.0, 1.0)[:, None]
-    y = ya + w * (yb - ya)
+    if model is None:
+        y = ya + w * (yb - ya)
+    else:
+        safe_tb = jnp.where(tb > ta, tb, ta + 1.0)  # a finished run's padding
+        ends = jax.vmap(lambda t0, y0, t1, y1: _step_ends(model, t0, y0, t1, y1, args))
+        ya, ra, rb = ends(ta, ya, safe_tb, yb)
+        linear = ya + w * (yb - ya)
+        h = span[:, None]
+        # Constraint reactions (a resting contact's force, a stuck block's friction) are
+        # not in the vector field: shift both end rates by the constant that makes their
+        # mean the chord's slope, as a reaction constant over the step would (zero for the
+        # trapezoidal rule, O(h^2) for any consistent step without reactions).
+        shift = (yb - ya) / h - 0.5 * (ra + rb)
+        ra, rb = ra + shift, rb + shift
+        hermite = (
+            (1 + 2 * w) * (1 - w) ** 2 * ya
+            + w * (1 - w) ** 2 * h * ra
+            + w**2 * (3 - 2 * w) * yb
+            + w**2 * (w - 1) * h * rb
+        )
+        y = jnp.where(model.algebraic, linear, hermite)
     beyond = t_eval > sol.ts[k] * (1 + 1e-12) + 1e-300
     return jnp.where(beyond[:, None], jnp.nan, y)
+
+
+def _step_ends(model: Model, t0, y0, t1, y1, args):
+    # The start state of the step [t0, t1] as the steppers take it (impacts applied,
+    # right-limit selections, the saltation shift of a switch inside), and the state-unit
+    # rates at both ends.
+    h = t1 - t0
+    y0, _ = model.apply_impacts(t0, h, y0, args)
+    y0, f0, _ = model.start_state(t0, h, y0, args)
+    y0 = y0 + model.switch_jump(t0, y0, t1, y1, args)
+    return y0, model.to_state(f0), model.to_state(model.f(t1, y1, args))
