@@ -168,7 +168,9 @@ class StepSizeEnv(eqx.Module):
         """The accuracy term at `t1`, or the failure cost."""
         _, at_end, _, _ = self._finished(state.loop)
         sol = finish(state.loop, jnp.asarray(self.task.t1, state.loop.y.dtype))
-        error = scaled_error(self.task, interpolate(sol, self.task.t_eval), state.y_ref)
+        model, _ = self.task.model()
+        y_eval = interpolate(sol, self.task.t_eval, model, state.args)
+        error = scaled_error(self.task, y_eval, state.y_ref)
         objective = params.objective
         return jnp.where(at_end, objective.accuracy(error), objective.failure), error
 
