@@ -185,8 +185,13 @@ def _table(results):
         "(max norm over the Jacobian) of the derivative of the final state against the "
         "exact derivative of the continuous problem; Bathe + semismooth Newton, PID "
         "controller at `rtol` (atol = rtol/1000), reverse mode. `before`: the code before "
-        "the switch sensitivities (impacts only); `after`: this version. Measured on a "
-        "shared 2-core machine while other jobs ran.",
+        "the switch sensitivities (impacts only); `after`: this version. "
+        + "; ".join(
+            f"`{label}` measured {results[label]['measured']}"
+            for label in labels
+            if results[label].get("measured")
+        )
+        + ".",
         "",
         "| scene | version | " + " | ".join(f"rtol {r:g}" for r in RTOLS) + " |",
         "|---|---|" + "---|" * len(RTOLS),
@@ -222,6 +227,10 @@ def main(argv=None):
         entry["accuracy"].update(accuracy(args.scenes, log))
     if args.cost:
         entry["cost"] = cost(log)
+    entry["measured"] = (
+        f"{time.strftime('%Y-%m-%d %H:%M')} ({os.cpu_count()} CPUs, load average "
+        f"{os.getloadavg()[0]:.2f} at the end)"
+    )
     path.write_text(json.dumps(results, indent=1))
     (RESULTS / "calibration.md").write_text(_table(results))
     print(_table(results))
