@@ -324,9 +324,10 @@ def interpolate(sol: Solution, t_eval, model: Model | None = None, args=None):
     by the cubic Hermite interpolant of the two end states and rates on differential rows
     (exact for a ball's parabola, whose steps event prediction makes long: the linear
     interpolant was off by $g h^2/8$, 0.47 m mid-flight on a drop from 1 m), linearly on
-    algebraic rows (multipliers). The end rates are those of the vector field shifted by
-    a constant so that their mean is the chord's slope: reactions that the vector field
-    does not contain (a resting contact's force) act as a constant over the step.
+    algebraic rows (multipliers) and on rows a projector moves (their reactions, a resting
+    contact's force or friction through a stick, are not in the vector field, so its
+    rates there are not the state's: a stuck slider's velocity would bulge by
+    $k V h^2/8$ between the ends of a long stick).
 
     A step across which a switch happens (`Model.switch_jump`) interpolates from its start
     moved by the saltation term $(f^- - f^+)\,d\tau$, zero in value: the interpolant's
@@ -348,19 +349,17 @@ def interpolate(sol: Solution, t_eval, model: Model | None = None, args=None):
         ya, ra, rb = ends(ta, ya, safe_tb, yb)
         linear = ya + w * (yb - ya)
         h = span[:, None]
-        # Constraint reactions (a resting contact's force, a stuck block's friction) are
-        # not in the vector field: shift both end rates by the constant that makes their
-        # mean the chord's slope, as a reaction constant over the step would (zero for the
-        # trapezoidal rule, O(h^2) for any consistent step without reactions).
-        shift = (yb - ya) / h - 0.5 * (ra + rb)
-        ra, rb = ra + shift, rb + shift
         hermite = (
             (1 + 2 * w) * (1 - w) ** 2 * ya
             + w * (1 - w) ** 2 * h * ra
             + w**2 * (3 - 2 * w) * yb
             + w**2 * (w - 1) * h * rb
         )
-        y = jnp.where(model.algebraic, linear, hermite)
+        # Rows a projector moves carry reactions the vector field does not contain (a
+        # resting contact's force, friction ramping through a stick): their end rates
+        # are not the state's, and they are interpolated linearly.
+        projected = model.projector.acts_on(sol.ys.shape[-1])
+        y = jnp.where(model.algebraic | projected, linear, hermite)
     beyond = t_eval > sol.ts[k] * (1 + 1e-12) + 1e-300
     return jnp.where(beyond[:, None], jnp.nan, y)
 

@@ -61,8 +61,9 @@ class Solution(eqx.Module):
     - `h_last`: the size of the last attempted step (the failing one if the run failed).
     - `n_accepted`, `n_rejected`, `n_iterations`: counts (iterations include rejected steps).
     - `result`: a [`nivpjax.RESULTS`][] code.
-    - `t_eval`, `y_eval`: the solution at the requested output times (piecewise-linear
-      interpolation between accepted steps), or `None`.
+    - `t_eval`, `y_eval`: the solution at the requested output times (cubic Hermite
+      interpolation between accepted steps on differential rows, linear on algebraic
+      rows), or `None`.
     - `attempts`: an [`nivpjax.AttemptLog`][] or `None`.
     """
 

@@ -6,6 +6,7 @@ from typing import Any
 
 import equinox as eqx
 import jax.numpy as jnp
+import numpy as np
 from jax import lax
 from jaxtyping import Array, Bool, Float, PyTree
 
@@ -200,6 +201,12 @@ class AbstractProjector(eqx.Module):
         `skipped` the time from the step's start to the switch so moved (0 if none; the
         model charges it to the error estimate). Default: `ctx.y_prev` unchanged, 0."""
         return ctx.restrict(ctx.y_prev), jnp.zeros((), ctx.y_prev.dtype)
+
+    def acts_on(self, n: int) -> np.ndarray:
+        """The rows of a state of size `n` that the projector may move (a static NumPy
+        mask; rows it never moves carry no reaction, so their rate is the vector field's).
+        Default: all."""
+        return np.ones(n, bool)
 
     @property
     def has_kinks(self) -> bool:

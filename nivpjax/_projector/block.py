@@ -159,6 +159,14 @@ class BlockProjector(AbstractProjector):
                 found = found | found_b
         return base, end, found
 
+    def acts_on(self, n: int) -> np.ndarray:
+        """The rows of the blocks whose projectors may move them."""
+        mask = np.zeros(n, bool)
+        for indices, projector in self.blocks:
+            idx = np.asarray(indices)
+            mask[idx] = projector.acts_on(idx.size)
+        return mask
+
     @property
     def has_kinks(self) -> bool:
         return any(projector.has_kinks for _, projector in self.blocks)

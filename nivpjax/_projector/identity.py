@@ -1,4 +1,5 @@
 import jax.numpy as jnp
+import numpy as np
 
 from .base import AbstractProjector, ProjectionContext
 
@@ -9,3 +10,6 @@ class Identity(AbstractProjector):
 
     def __call__(self, z, ctx: ProjectionContext):
         return jnp.asarray(z)
+
+    def acts_on(self, n: int) -> np.ndarray:
+        return np.zeros(n, bool)

@@ -107,6 +107,9 @@ class EventLocated(AbstractProjector):
             return super().early_kinks(ctx)
         return self._kink_crossings(ctx)[0]
 
+    def acts_on(self, n: int) -> np.ndarray:
+        return self.projector.acts_on(n)
+
     def initial_violation(self, ctx: ProjectionContext):
         return self.projector.initial_violation(ctx)
 
