@@ -319,15 +319,14 @@ def interpolate(sol: Solution, t_eval, model: Model | None = None, args=None):
     solve stopped (a failed run is flagged in `result`).
 
     Without `model`: piecewise linear. With it, each step is interpolated as the steppers
-    start it: from the state after the impacts closing at its start
-    (`Model.apply_impacts`), with the right-limit selections there (`Model.start_state`),
-    by the cubic Hermite interpolant of the two end states and rates on differential rows
-    (exact for a ball's parabola, whose steps event prediction makes long: the linear
-    interpolant was off by $g h^2/8$, 0.47 m mid-flight on a drop from 1 m), linearly on
-    algebraic rows (multipliers) and on rows a projector moves (their reactions, a resting
-    contact's force or friction through a stick, are not in the vector field, so its
-    rates there are not the state's: a stuck slider's velocity would bulge by
-    $k V h^2/8$ between the ends of a long stick).
+    start it (`Model.step_start`: the impacts closing at its start applied, the
+    right-limit selections there), by the cubic Hermite interpolant of the two end states
+    and rates on differential rows (exact for a ball's parabola, whose steps event
+    prediction makes long: the linear interpolant was off by $g h^2/8$, 0.47 m mid-flight
+    on a drop from 1 m), linearly on algebraic rows (multipliers) and on rows a projector
+    moves (their reactions, a resting contact's force or friction through a stick, are not
+    in the vector field, so its rates there are not the state's: a stuck slider's velocity
+    would bulge by $k V h^2/8$ between the ends of a long stick).
 
     A step across which a switch happens (`Model.switch_jump`) interpolates from its start
     moved by the saltation term $(f^- - f^+)\,d\tau$, zero in value: the interpolant's
@@ -369,7 +368,6 @@ def _step_ends(model: Model, t0, y0, t1, y1, args):
     # right-limit selections, the saltation shift of a switch inside), and the state-unit
     # rates at both ends.
     h = t1 - t0
-    y0, _ = model.apply_impacts(t0, h, y0, args)
-    y0, f0, _ = model.start_state(t0, h, y0, args)
+    y0, f0, _ = model.step_start(t0, h, y0, args)
     y0 = y0 + model.switch_jump(t0, y0, t1, y1, args)
     return y0, model.to_state(f0), model.to_state(model.f(t1, y1, args))

@@ -262,6 +262,15 @@ class Model(eqx.Module):
             return jnp.zeros_like(y0)
         return tangent_only(lambda y: self._switch_shifts(t0, y0, t1, args)(y)[0], y1)
 
+    def step_start(self, t0, h, y0, args):
+        """The start of a step of size `h` as every stepper takes it: the impacts closing
+        there applied (`apply_impacts`), then the right-limit selections (`start_state`).
+        Returns the start state, the rate there, and the local error both charge (the
+        impact's timing, a switch moved to the start)."""
+        y0, impact_error = self.apply_impacts(t0, h, y0, args)
+        y0, f0, start_error = self.start_state(t0, h, y0, args)
+        return y0, f0, impact_error + start_error
+
     def start_state(self, t0, h, y0, args):
         """`y0` with the right-limit selections at the start of a step of size `h` (see
         `AbstractProjector.start_selection`; unchanged where the projector has none), the

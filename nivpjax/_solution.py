@@ -62,8 +62,8 @@ class Solution(eqx.Module):
     - `n_accepted`, `n_rejected`, `n_iterations`: counts (iterations include rejected steps).
     - `result`: a [`nivpjax.RESULTS`][] code.
     - `t_eval`, `y_eval`: the solution at the requested output times (cubic Hermite
-      interpolation between accepted steps on differential rows, linear on algebraic
-      rows), or `None`.
+      interpolation between accepted steps on differential rows no projector moves,
+      linear on the others), or `None`.
     - `attempts`: an [`nivpjax.AttemptLog`][] or `None`.
     """
 

@@ -77,8 +77,9 @@ def solve(
       [`nivpjax.ConstantStepSize`][] with `h0` for fixed steps.
     - `h0`: the initial step (estimated if `None` and the controller is adaptive).
     - `t_eval`: optional output times in $[t_0, t_1]$; the solution there is interpolated
-      into `Solution.y_eval` (cubic Hermite on differential rows from each step's start
-      as the stepper took it, linear on algebraic rows; see `nivpjax._loop.interpolate`).
+      into `Solution.y_eval` (cubic Hermite on differential rows no projector moves, from
+      each step's start as the stepper took it, linear on the others; see
+      `nivpjax._loop.interpolate`).
     - `max_steps`: bound on attempted steps; buffers have `max_steps + 1` rows.
     - `error_estimate`: `"auto"` uses the stepper's embedded estimate when it has one and
       Richardson step doubling otherwise; `"richardson"` forces step doubling.

@@ -81,8 +81,7 @@ class Bathe(AbstractStepper):
         g = self.gamma
         t_mid = t0 + g * h
         t1 = t0 + h
-        y0, impact_error = model.apply_impacts(t0, h, y0, args)
-        y0, f0, start_error = model.start_state(t0, h, y0, args)
+        y0, f0, start_error = model.step_start(t0, h, y0, args)
         sol1, mult1 = model.solve_stage(self.solver, t_mid, g * h, y0, f0, 0.5, y0, y0, args)
         y_mid = sol1.value
         c1 = (1 - g) / g
@@ -125,7 +124,7 @@ class Bathe(AbstractStepper):
         stats = StepStats.combine(stats_of(sol1), stats_of(sol2))
         return StepOutput(
             y1=y1,
-            y_error=model.to_state(e) + impact_error + start_error,
+            y_error=model.to_state(e) + start_error,
             multipliers=multipliers,
             stats=stats,
         )

@@ -112,8 +112,7 @@ class _AbstractTheta(AbstractStepper):
 
     def step(self, model, t0, h, y0, args):
         t1 = t0 + h
-        y0, impact_error = model.apply_impacts(t0, h, y0, args)
-        y0, f0, start_error = model.start_state(t0, h, y0, args)
+        y0, f0, start_error = model.step_start(t0, h, y0, args)
         f_explicit = None if self.theta == 1.0 else f0
         sol, multipliers = model.solve_stage(
             self.solver, t1, h, y0, f_explicit, self.theta, y0, y0, args
@@ -124,7 +123,7 @@ class _AbstractTheta(AbstractStepper):
         e = theta_error(model, self.theta, t0, h, y0, y1, f0, f1, reaction, args)
         return StepOutput(
             y1=y1,
-            y_error=model.to_state(e) + impact_error + start_error,
+            y_error=model.to_state(e) + start_error,
             multipliers=multipliers,
             stats=stats_of(sol),
         )
