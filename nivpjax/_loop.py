@@ -105,22 +105,32 @@ def init_state(
     consistent algebraic components, empty buffers (`max_steps + 1` rows)."""
     dtype = y0.dtype
     n = y0.shape[0]
-    f0 = model.f(t0, y0, args)
     error_order = _error_order(stepper, controller)
-    h, controller_state = controller.init(t0, t1, y0, h0, f0, error_order, error_mask)
     h_min = controller.bounds[0]
     h_min = default_h_min(t0, t1, dtype) if h_min is None else jnp.asarray(h_min, dtype)
-    h = jnp.maximum(h, h_min)
+
+    def first_step(y0):
+        # The controller's first step reads the rate y' at t0 (zero on algebraic rows).
+        rate = model.to_state(model.f(t0, y0, args))
+        h, controller_state = controller.init(t0, t1, y0, h0, rate, error_order, error_mask)
+        return jnp.maximum(h, h_min), controller_state
+
+    h, controller_state = first_step(y0)
     result0 = RESULTS.where(
         model.initial_violation(t0, h, y0, args) > 0,
         RESULTS.initial_state_infeasible,
         RESULTS.successful,
     )
     if model.has_algebraic:
+        # The projection's fixed point does not depend on the stage length (it only scales
+        # the iteration), so the provisional step serves; the first step is then chosen
+        # from the consistent state's rate (a relay's multiplier is 0 before it is solved,
+        # which would make the rate, and so the first step, wrong).
         init = model.consistent_initial_state(stepper.solver, t0, h, y0, args)
         ok = init.result == RESULTS.successful
         y0 = jnp.where(ok, init.value, y0)
         result0 = RESULTS.where(ok, result0, RESULTS.nonlinear_failure)
+        h, controller_state = first_step(y0)
 
     rows = max_steps + 1
     return _LoopState(

@@ -454,8 +454,9 @@ def test_chua_kinks(chua_run):
     # The saturation multiplier is clip(x, -1, 1) at every computed state: to round-off
     # except at the states where a step lands just short of a kink (event prediction stops
     # a relative 1e-8 short), where it may already carry the kink's selection: measured one
-    # state of 10749 at 3.7e-9.
-    np.testing.assert_allclose(m["sat"][1:, 0], np.clip(x[1:, 0], -1, 1), rtol=0, atol=1e-8)
+    # state of 10749 at 3.7e-9, and one of 10743 at 1.0e-8 once the first step is chosen
+    # from the consistent initial rate (a different step sequence).
+    np.testing.assert_allclose(m["sat"][1:, 0], np.clip(x[1:, 0], -1, 1), rtol=0, atol=3e-8)
     exact = np.abs(m["sat"][1:, 0] - np.clip(x[1:, 0], -1, 1)) <= 1e-12
     assert np.mean(exact) > 0.999
     # Kink crossings: linear interpolation of |x| - 1 between accepted points (measured

@@ -46,8 +46,9 @@ class AbstractController(eqx.Module):
     """Decides whether to accept a step and how large the next one is.
 
     - `init(t0, t1, y0, h0, f0, error_order, error_mask) -> (h, state)`: the first step size
-      (`h0` if given, otherwise the controller's own estimate; `f0` is $f(t_0, y_0)$) and
-      the controller's state.
+      (`h0` if given, otherwise the controller's own estimate; `f0` is the rate $y'(t_0)$
+      at the consistent initial state: $A^{-1} f$ on differential rows, zero on algebraic
+      rows) and the controller's state.
     - `adapt(info, state) -> (accept, h_next, state)`: after an attempt. Failed nonlinear
       solves arrive with `info.stats.nonlinear_result` set; a controller must reject them.
     - `h_min`, `h_max`: step bounds enforced by the loop (`h_min` failures set
