@@ -180,6 +180,46 @@ def _relay_crossing_exact(x0, b, a, T):
     return x_T, explicit - (b - 1 + a * np.sin(tau)) * dtau
 
 
+@jax.jit
+def _relay_fixed_final(x0, b):
+    # Constant steps of 0.05 from t = 0 reach the switch of x' = -w + b (x0 = -0.5, b = 1.5:
+    # tau = 0.2) after four steps.
+    sol = _relay_scene().solve(
+        0.0,
+        0.6,
+        x0[None],
+        {"b": b, "a": jnp.zeros(())},
+        stepper=nj.Bathe(),
+        controller=nj.ConstantStepSize(),
+        h0=0.05,
+        max_steps=64,
+        throw=False,
+    )
+    return sol.y_final[0], (sol.y_final[0], sol.ys[4], sol.result)
+
+
+def test_relay_step_ending_at_round_off_before_the_switch_carries_its_term():
+    # x0 just below -0.5: the fourth step ends 8e-17 to 3e-16 short of the surface (as an
+    # adaptive step does that lands just before a switch), so no stage crosses, and the
+    # next step starts on the surface (to round-off) with the flipped selection: that start
+    # must carry the switch time's derivative. x(T) = (b - 1)(T - tau), tau = -x0 / (1 + b):
+    # d x(T)/d x0 = (b - 1)/(b + 1) = 0.2, d x(T)/d b = T - tau - (b - 1) x0/(1 + b)^2.
+    # Before the fix: d x(T)/d x0 = 1 (the term lost), as at rtol 1e-7 in the test below.
+    b, T = 1.5, 0.6
+    x0 = -0.5
+    for _ in range(3):
+        x0 = float(np.nextafter(x0, -1.0))
+        (dx0, db), (y, y_switch, result) = jax.jacrev(
+            _relay_fixed_final, argnums=(0, 1), has_aux=True
+        )(jnp.asarray(x0), jnp.asarray(b))
+        assert result == nj.RESULTS.successful
+        assert -1e-15 < y_switch[0] < 0 and y_switch[1] == -1  # short of it, on w = -1
+        tau = -x0 / (1 + b)
+        np.testing.assert_allclose(y, (b - 1) * (T - tau), rtol=1e-12)
+        np.testing.assert_allclose(dx0, (b - 1) / (b + 1), rtol=1e-9)
+        np.testing.assert_allclose(db, T - tau - (b - 1) * x0 / (1 + b) ** 2, rtol=1e-9)
+
+
 def test_relay_crossing_carries_the_saltation_term():
     # x0 = -0.5, b = 1.5, a = 0.3: crosses x = 0 near t = 0.2 from slope 1 + b + a sin t to
     # b - 1 + a sin t. Without the switch term d x(T)/d x0 would be 1, not about 0.2.

@@ -139,7 +139,9 @@ class BlockProjector(AbstractProjector):
                 sub = self._sub(ctx, indices, ctx.y_prev.shape)
                 w, skipped_b = projector.start_selection(sub)
                 out = out.at[np.asarray(indices)].set(w)
-                skipped = jnp.maximum(skipped, skipped_b)
+                # Ties go to the block (not `maximum`, which halves the derivative of two
+                # equal values: a switch on the surface skips a time of 0 with a derivative).
+                skipped = jnp.where(skipped_b >= skipped, skipped_b, skipped)
         return out, skipped
 
     @property

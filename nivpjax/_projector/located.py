@@ -256,9 +256,21 @@ class EventLocated(AbstractProjector):
         w = jnp.where(on, self.projector(w0 - step, ctx), w0)
         # The skipped time keeps its derivative (d tau = -d s0 / sdot): the model moves the
         # start along the jump of the rate by it (zero in value), the saltation term of the
-        # switch moved to the start.
-        skipped = jnp.max(jnp.where(on & ~at, delay, 0.0), initial=0.0)
-        return w, skipped
+        # switch moved to the start. A start on the surface to round-off carries it too when
+        # the selection flips from one boundary point of its set to another (a transversal
+        # crossing; the previous stage ended short of the surface, so it carried none): a
+        # step that ended 3e-17 short of a relay's switch lost the switch's term entirely
+        # (d x(T)/d x0 = 1 instead of 0.22). Entering or leaving a sliding mode there
+        # carries none (see `switch_shift`).
+        jump = w - w0
+        settled = (self.projector(w + jump, ctx) == w) & (self.projector(w0 - jump, ctx) == w0)
+        flips = at & on & (jump != 0) & settled & (rate != 0)
+        tau = -s0 / jnp.where(flips, rate, 1.0)
+        tau = jax.lax.stop_gradient(jnp.abs(tau)) + tau - jax.lax.stop_gradient(tau)
+        skipped = jnp.where(on & ~at, delay, jnp.where(flips, tau, 0.0))
+        # The largest by indexing, so that the derivative of a value of 0 (on the surface)
+        # is not halved by a tie, as `max` would.
+        return w, skipped[jnp.argmax(skipped)]
 
     def violation(self, ctx: ProjectionContext):
         s0 = jnp.atleast_1d(self.surface(ctx.t - ctx.h, ctx.y_prev, ctx.args))
