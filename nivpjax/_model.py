@@ -12,6 +12,10 @@ from ._projector import AbstractProjector, ProjectionContext
 from ._tangent import tangent_only
 
 
+def _is_none(x):
+    return x is None
+
+
 class Model(eqx.Module):
     r"""$A y' = f(t, y, \text{args})$ with the set-valued rule encoded by `projector`.
 
@@ -310,7 +314,7 @@ class Model(eqx.Module):
             return None
         return jax.lax.stop_gradient(self._rate(t - h, y0, args))
 
-    def _context(self, t, h, y0, y1, args, rate=None, rate_at=None):
+    def _context(self, t, h, y0, y1, args, rate=None, rate_at=None, end_rate=None):
         rho = jnp.full_like(y1, h)
         return ProjectionContext(
             t=t,
@@ -322,6 +326,7 @@ class Model(eqx.Module):
             rate=rate,
             rate_at=rate_at,
             start_rate=self._start_rate(t, h, y0, args),
+            end_rate=end_rate,
         )
 
     def violation(self, t1, h, y0, y1, args):
@@ -335,7 +340,11 @@ class Model(eqx.Module):
         `AbstractProjector.next_event`)."""
         # Impacts at the start are part of the step: predict from the state after them.
         y0 = jax.lax.stop_gradient(self.apply_impacts(t1 - h, h, y0, args)[0])
-        ctx = self._context(t1, h, y0, y1, args, rate=self.f(t1, y1, args))
+        rate = self.f(t1, y1, args)
+        ctx = self._context(t1, h, y0, y1, args, rate=rate, end_rate=self.to_state(rate))
+        if ctx.start_rate is None:  # the switching functions' predictions read it too
+            start_rate = self._rate(t1 - h, y0, args)
+            ctx = eqx.tree_at(lambda c: c.start_rate, ctx, start_rate, is_leaf=_is_none)
         return jax.lax.stop_gradient(self.projector.next_event(ctx))
 
     def initial_violation(self, t0, h, y0, args):

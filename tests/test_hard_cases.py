@@ -506,8 +506,10 @@ def test_sliding_mode_control_without_chattering(name):
     assert np.all(np.abs(w) <= 1.0)
     d = 0.5 * np.sin(2 * np.pi * ts)
     if not name.startswith("tr"):  # the trapezoidal multiplier rings (documented)
-        # Measured 2.7e-13 (Newton), 5.2e-8 (VI).
-        atol = 1e-6 if name.endswith("-vi") else 1e-10
+        # Measured 2.7e-13 (Newton); VI 5.2e-8, and 2.3e-6 at one step of another step
+        # sequence: the VI method stops on the residual, where a multiplier error in sliding
+        # shows only through the state it moves, h^2 k times smaller.
+        atol = 1e-5 if name.endswith("-vi") else 1e-10
         np.testing.assert_allclose(w[sliding], (d + x2)[sliding] / 2, rtol=0, atol=atol)
     # Exponential decay along the surface; measured 1.3e-4 (be), 1.9e-4 (betr), 6e-6 (tr,
     # bathe).

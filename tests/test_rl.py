@@ -48,7 +48,9 @@ def test_vector_env_matches_single(env):
     obs_v, _ = vec.reset(seed=10)
     singles = [StepSizeGymEnv(**KW) for _ in range(2)]
     obs_s = [s.reset(seed=10 + i)[0] for i, s in enumerate(singles)]
-    np.testing.assert_allclose(obs_v, np.stack(obs_s), rtol=1e-12)
+    # Round-off only: vmapped kernels may order operations differently, and feature 0 is the
+    # log of an error estimate (a difference of nearly equal stage values); measured 3e-11.
+    np.testing.assert_allclose(obs_v, np.stack(obs_s), rtol=1e-10)
     actions = np.array([[0.3, -0.2], [0.1, 0.5], [-0.4, 0.2], [0.2, 0.2]], np.float32)
     for a in actions:
         obs_v, rew_v, term_v, trunc_v, _ = vec.step(a[:, None])

@@ -38,6 +38,9 @@ class ProjectionContext(eqx.Module):
       y_{\\text{prev}})$ in state units, for projectors that predict events from the start
       (a contact's normal acceleration tells a graze from an impact); set by the model for
       projectors with events (`has_event_time`), `None` otherwise.
+    - `end_rate`: the rate $y'$ of the differential rows at the end of a step (state
+      units, zero on algebraic rows), set with `rate` when the model asks for
+      `next_event`; `None` otherwise.
     - `tangent`: `True` when the projector is evaluated to linearise a stage at its
       solution (the element of the generalised Jacobian that derivatives use, through the
       implicit function theorem), `False` during the nonlinear iteration. Projectors that
@@ -55,6 +58,7 @@ class ProjectionContext(eqx.Module):
     rate: Float[Array, " n"] | None = None
     rate_at: Callable[[Array], Array] | None = None
     start_rate: Float[Array, " n"] | None = None
+    end_rate: Float[Array, " n"] | None = None
     tangent: bool = eqx.field(static=True, default=False)
 
     def restrict(self, v):

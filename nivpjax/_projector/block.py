@@ -87,6 +87,7 @@ class BlockProjector(AbstractProjector):
             rate=ctx.rate,
             rate_at=ctx.rate_at,
             start_rate=ctx.start_rate,
+            end_rate=ctx.end_rate,
             tangent=ctx.tangent,
         )
 

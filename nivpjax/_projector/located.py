@@ -9,7 +9,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .base import AbstractProjector, ProjectionContext, switch_delay
-from .predict import secant_crossing
+from .predict import first_root, secant_crossing
 
 
 # A step that starts this fraction of its size or less before a switch treats the switch as
@@ -125,14 +125,53 @@ class EventLocated(AbstractProjector):
         return jnp.any(s0 * s1 < 0) | self.projector.switched(ctx)
 
     def next_event(self, ctx: ProjectionContext):
-        """The first zero of the switching function along the secant through its values at
-        the two ends of the attempt (inside the attempt if it changed sign, beyond it if it
-        approaches zero), or the wrapped projector's own prediction if earlier."""
+        r"""The first zero of the switching function $s$ (or the wrapped projector's own
+        prediction if earlier), from its values $s_0, s_1$ at the two ends of the attempt
+        and its rates $\dot s_0, \dot s_1$ there ($\partial_t s + \nabla s \cdot y'$,
+        from `ctx.start_rate` and `ctx.end_rate`; the start rate is that of the start's
+        selection, the branch the flow follows up to the switch):
+
+        - $s$ changed sign: the zero of the secant through $s_0$ and $s_1$, inside the
+          attempt.
+        - $s$ ends on the surface (a landing in a sliding mode: the end is no witness of
+          when it got there): the zero of the start's tangent line $s_0 + \dot s_0\tau$.
+        - $s$ keeps its sign: the first zero ahead of the quadratic with $q(-h) = s_0$,
+          $q(0) = s_1$, $q'(0) = \dot s_1$. A secant misses the acceleration of an
+          approach to a sliding surface: the steps it proposed overshot the switch, and
+          each overshoot was rejected (the relay at rtol 1e-4: five rejections on the way
+          in, 46 attempts in all; 34 with this prediction).
+
+        Without the rates (a context that does not carry them), the secant through $s_0$
+        and $s_1$. `inf` where nothing is predicted."""
         s0 = jnp.atleast_1d(self.surface(ctx.t - ctx.h, ctx.y_prev, ctx.args))
         s1 = jnp.atleast_1d(self.surface(ctx.t, ctx.y_iter, ctx.args))
         dtype = ctx.y_iter.dtype
-        own = jnp.min(secant_crossing(s0.astype(dtype), s1.astype(dtype), ctx.h), initial=jnp.inf)
+        s0, s1 = s0.astype(dtype), s1.astype(dtype)
+        own = secant_crossing(s0, s1, ctx.h)
+        if ctx.start_rate is not None and ctx.end_rate is not None:
+            own = self._predict(ctx, s0, s1, own)
+        own = jnp.min(own, initial=jnp.inf)
         return jnp.minimum(own, self.projector.next_event(ctx))
+
+    def _predict(self, ctx: ProjectionContext, s0, s1, secant):
+        dtype = s1.dtype
+
+        def rate(t, y, y_dot):
+            t = jnp.asarray(t, dtype)
+            surface = lambda t, y: jnp.atleast_1d(self.surface(t, y, ctx.args)).astype(dtype)
+            return jax.jvp(surface, (t, y), (jnp.ones_like(t), y_dot.astype(dtype)))[1]
+
+        ds0 = rate(ctx.t - ctx.h, ctx.y_prev, ctx.start_rate)
+        ds1 = rate(ctx.t, ctx.y_iter, ctx.end_rate)
+        h = jnp.where(ctx.h > 0, ctx.h, 1.0)
+        tiny = 64 * jnp.finfo(dtype).eps * (1.0 + jnp.maximum(jnp.abs(s0), jnp.abs(s1)))
+        away0, away1 = jnp.abs(s0) > tiny, jnp.abs(s1) > tiny
+        landed = away0 & ~away1
+        reach = jnp.minimum(first_root(s0, ds0, jnp.zeros_like(s0)), h)
+        off = (s0 * s1 > 0) & away0 & away1
+        ahead = h + first_root(s1, ds1, 2 * (ds1 - (s1 - s0) / h) / h)
+        out = jnp.where(landed & jnp.isfinite(reach), reach, secant)
+        return jnp.where(off, ahead, out)
 
     @property
     def has_event_time(self) -> bool:
