@@ -108,13 +108,14 @@ def reg_label(name, reg):
 
 # --- diffrax ---------------------------------------------------------------------------------
 DIFFRAX_SOLVERS = {"Kvaerno5": diffrax.Kvaerno5, "Tsit5": diffrax.Tsit5}
-DIFFRAX_MAX_STEPS = 100_000
+DIFFRAX_TIERS = (1024, 16384, 100_000)  # output-buffer sizes (max_steps), see BufferTiers
 
 
-def make_diffrax(case, solver_name):
-    """`run(rtol, atol, reg, x0)` for one scene and solver, to be compiled once (the
-    tolerances and the regularisation strength are inputs, so one compilation serves the
-    whole sweep). Returns (ts, xs, accepted, rejected, success) with ts padded by inf."""
+def make_diffrax(case, solver_name, max_steps):
+    """`run(rtol, atol, reg, x0)` for one scene and solver, to be compiled once per buffer
+    size (the tolerances and the regularisation strength are inputs, so one compilation
+    serves the whole sweep). Returns (ts, xs, accepted, rejected, success, overflowed)
+    with ts padded by inf."""
     _, _, p = case.build()
     model = MODELS[case.name]
     term = diffrax.ODETerm(lambda t, x, reg: model(t, x, p, reg, jnp))
@@ -132,7 +133,7 @@ def make_diffrax(case, solver_name):
             args=reg,
             stepsize_controller=controller,
             saveat=diffrax.SaveAt(t0=True, steps=True),
-            max_steps=DIFFRAX_MAX_STEPS,
+            max_steps=max_steps,
             throw=False,
         )
         return (
@@ -141,16 +142,22 @@ def make_diffrax(case, solver_name):
             sol.stats["num_accepted_steps"],
             sol.stats["num_rejected_steps"],
             sol.result == diffrax.RESULTS.successful,
+            sol.result == diffrax.RESULTS.max_steps_reached,
         )
 
     return run
 
 
-def run_diffrax(compiled, x0, rtol, atol, reg, repeats):
-    """Time one diffrax configuration with the compiled `run` of `make_diffrax`."""
+def diffrax_overflowed(out):
+    return bool(out[-1])
+
+
+def run_diffrax(tiers, x0, rtol, atol, reg, repeats):
+    """Time one diffrax configuration with the `BufferTiers` of `make_diffrax`."""
     args = (jnp.asarray(rtol), jnp.asarray(atol), jnp.asarray(reg), jnp.asarray(x0))
-    t_run, out = median_time(compiled, *args, repeats=repeats, number=auto_number(compiled, *args))
-    ts, xs, acc, rej, ok = (np.asarray(o) for o in out)
+    fn, _, _ = tiers(*args)
+    t_run, out = median_time(fn, *args, repeats=repeats, number=auto_number(fn, *args))
+    ts, xs, acc, rej, ok, _ = (np.asarray(o) for o in out)
     keep = np.isfinite(ts)
     return dict(
         ts=ts[keep],

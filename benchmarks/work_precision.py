@@ -17,12 +17,18 @@ import numpy as np
 import nivpjax as nj
 
 from . import reference_models, regularised
-from ._common import TimeLimit, auto_number, compile_timed, median_time, time_limit
+from ._common import (
+    BufferTiers,
+    TimeLimit,
+    auto_number,
+    median_time,
+    time_limit,
+)
 from .cases import CASES
 
 
 ATOL_FACTOR = 1e-3
-MAX_STEPS = 16384
+NJ_TIERS = (1024, 16384)  # output-buffer sizes (max_steps), see `BufferTiers`
 EQUAL_ERR_SLACK = 1.1  # nivpjax "equal or better" error: err <= 1.1 x the other's error
 REF_BROKEN = 0.5  # a reference error above this is a qualitatively wrong trajectory
 REG_TARGET_ERR = 1e-3  # the regularised-solver target applies below this error
@@ -91,27 +97,28 @@ def nivpjax_rows(case, configs, rtols, repeats, log):
         stepper = STEPPERS[stepper_name](solver=SOLVERS[solver_name]())
         label = f"{stepper_name} + {solver_name}"
 
-        def solve(rtol, atol, x0, args, stepper=stepper):
-            controller = nj.PIDController(rtol=rtol, atol=atol, h_max=case.h_max)
-            return scene.solve(
-                0.0,
-                case.t1,
-                x0,
-                args,
-                stepper=stepper,
-                controller=controller,
-                max_steps=MAX_STEPS,
-                throw=False,
-            )
+        def build(max_steps, stepper=stepper):
+            def solve(rtol, atol, x0, args):
+                controller = nj.PIDController(rtol=rtol, atol=atol, h_max=case.h_max)
+                return scene.solve(
+                    0.0,
+                    case.t1,
+                    x0,
+                    args,
+                    stepper=stepper,
+                    controller=controller,
+                    max_steps=max_steps,
+                    throw=False,
+                )
+
+            return solve
 
         tol = lambda r: (jnp.asarray(r), jnp.asarray(r * ATOL_FACTOR))
-        compiled, compile_s = compile_timed(solve, *tol(rtols[0]), x0, args)
+        tiers = BufferTiers(build, NJ_TIERS, _nj_overflowed, *tol(rtols[0]), x0, args)
         for i, rtol in enumerate(rtols):
             inputs = (*tol(rtol), x0, args)
-            t0 = time.perf_counter()
-            sol = compiled(*inputs)
-            sol.ys.block_until_ready()
-            once = time.perf_counter() - t0
+            compiled, sol, once = tiers(*inputs)
+            compile_s = tiers.compile_s
             common = dict(compile=compile_s if i == 0 else np.nan)
             if sol.result != nj.RESULTS.successful:
                 rows.append(
@@ -157,6 +164,10 @@ def nivpjax_rows(case, configs, rtols, repeats, log):
                 + (f" (compile {compile_s:.1f} s)" if i == 0 else "")
             )
     return rows
+
+
+def _nj_overflowed(sol):
+    return bool(sol.result == nj.RESULTS.time_max_steps_reached)
 
 
 # --- the reference package -------------------------------------------------------------------
@@ -234,13 +245,19 @@ def diffrax_rows(case, solvers, strengths, rtols, repeats, log):
     _, x0, _ = case.build()
     rows = []
     for name in solvers:
-        run = regularised.make_diffrax(case, name)
         a0 = (jnp.asarray(rtols[0]), jnp.asarray(rtols[0] * ATOL_FACTOR), jnp.asarray(1.0))
-        compiled, compile_s = compile_timed(run, *a0, jnp.asarray(x0))
+        tiers = BufferTiers(
+            lambda max_steps, name=name: regularised.make_diffrax(case, name, max_steps),
+            regularised.DIFFRAX_TIERS,
+            regularised.diffrax_overflowed,
+            *a0,
+            jnp.asarray(x0),
+        )
         first = True
         for reg in strengths:
             for rtol in rtols:
-                r = regularised.run_diffrax(compiled, x0, rtol, rtol * ATOL_FACTOR, reg, repeats)
+                r = regularised.run_diffrax(tiers, x0, rtol, rtol * ATOL_FACTOR, reg, repeats)
+                compile_s = tiers.compile_s
                 rows.append(
                     _row(
                         case,
