@@ -100,9 +100,9 @@ def report(results, n_draws, seconds):
         "# Learned step-size control vs PID (held-out draws)",
         "",
         f"`python -m benchmarks.learning --draws {n_draws}`; {time.strftime('%Y-%m-%d %H:%M')}, "
-        f"{os.cpu_count()} CPUs shared with other engineers' jobs (load average at the end "
-        "of each scene below; wall times are inflated and noisy). Means over the held-out "
-        "draws; error: geometric mean of the RMS scaled error vs the tight reference.",
+        f"{os.cpu_count()} CPUs (load average at the end of each scene below: above 1, other "
+        "work ran beside it and wall times are inflated). Means over the held-out draws; "
+        "error: geometric mean of the RMS scaled error vs the tight reference.",
         "",
     ]
     for r in results:
