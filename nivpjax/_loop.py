@@ -151,9 +151,9 @@ def init_state(
         # Each buffer must be a distinct array object (equinox locates buffers by identity;
         # two identical `jnp.zeros` may be one cached constant).
         multipliers=jnp.zeros((rows, n), dtype).at[0].set(0.0),
-        iterations=jnp.zeros((rows,), dtype).at[0].set(0.0),
+        iterations=jnp.zeros((rows,), jnp.int32),
         residual_norms=jnp.zeros((rows,), dtype).at[0].set(-0.0),
-        nonlinear_success=jnp.ones((rows,), dtype).at[0].set(1.0),
+        nonlinear_success=jnp.ones((rows,), bool),
         attempts=_init_attempts(max_steps, dtype) if save_attempts else None,
     )
 
@@ -177,7 +177,6 @@ def attempt(
     the loop for manual stepping."""
     h_min = s.h_min
     h_max = controller.bounds[1]
-    dtype = s.y.dtype
     remaining = t1 - s.t
     # Land on t1 rather than leave a remainder below h_min (float accumulation of
     # fixed steps would otherwise leave a step of a few ulps).
@@ -246,9 +245,9 @@ def attempt(
         ys=put(s.ys, y_new),
         hs=put(s.hs, h_try),
         multipliers=put(s.multipliers, out.multipliers),
-        iterations=put(s.iterations, out.stats.iterations.astype(dtype)),
+        iterations=put(s.iterations, out.stats.iterations.astype(jnp.int32)),
         residual_norms=put(s.residual_norms, out.stats.residual_norm),
-        nonlinear_success=put(s.nonlinear_success, nonlinear_ok.astype(dtype)),
+        nonlinear_success=put(s.nonlinear_success, nonlinear_ok),
         attempts=attempts,
     )
 
@@ -262,19 +261,20 @@ def finish(final: _LoopState, t1) -> Solution:
         final.result,
     )
     # Padding rows repeat the last accepted state so that reductions and plots stay finite.
+    # The other buffers hold their padding already (inf times; zero steps, counts and
+    # residuals; success) in every row that no accepted step wrote.
     k = final.n_accepted
-    row = jnp.arange(rows)
-    pad = row > k
+    pad = jnp.arange(rows) > k
     ys = jnp.where(pad[:, None], final.ys[k], final.ys)
     multipliers = jnp.where(pad[:, None], final.multipliers[k], final.multipliers)
     return Solution(
-        ts=jnp.where(pad, jnp.inf, final.ts),
+        ts=final.ts,
         ys=ys,
-        hs=jnp.where(pad, 0.0, final.hs),
+        hs=final.hs,
         multipliers=multipliers,
-        iterations=jnp.where(pad, 0, final.iterations).astype(jnp.int32),
-        residual_norms=jnp.where(pad, 0.0, final.residual_norms),
-        nonlinear_success=jnp.where(pad, True, final.nonlinear_success > 0),
+        iterations=final.iterations,
+        residual_norms=final.residual_norms,
+        nonlinear_success=final.nonlinear_success,
         t_final=final.t,
         h_last=final.h_last,
         y_final=final.y,

@@ -47,8 +47,9 @@ class Solution(eqx.Module):
     """The result of [`nivpjax.solve`][].
 
     Buffers have `max_steps + 1` rows; the first `n_accepted + 1` are the initial point and
-    the accepted steps, the rest are padding (`t = inf`, other entries repeat the last
-    accepted value so that plots and reductions stay finite). Use
+    the accepted steps, the rest are padding (`t = inf`; states and multipliers repeat the
+    last accepted value so that plots and reductions stay finite; step sizes, iterations
+    and residual norms are 0, `nonlinear_success` True). Use
     [`nivpjax.Solution.trimmed`][] on concrete results to drop the padding.
 
     - `ts`, `ys`: accepted times and states.
