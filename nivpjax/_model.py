@@ -12,10 +12,6 @@ from ._projector import AbstractProjector, ProjectionContext
 from ._tangent import tangent_only
 
 
-def _is_none(x):
-    return x is None
-
-
 class Model(eqx.Module):
     r"""$A y' = f(t, y, \text{args})$ with the set-valued rule encoded by `projector`.
 
@@ -314,8 +310,10 @@ class Model(eqx.Module):
             return None
         return jax.lax.stop_gradient(self._rate(t - h, y0, args))
 
-    def _context(self, t, h, y0, y1, args, rate=None, rate_at=None, end_rate=None):
+    def _context(self, t, h, y0, y1, args, rate=None, rate_at=None, start_rate=None, end_rate=None):
         rho = jnp.full_like(y1, h)
+        if start_rate is None:
+            start_rate = self._start_rate(t, h, y0, args)
         return ProjectionContext(
             t=t,
             h=h,
@@ -325,7 +323,7 @@ class Model(eqx.Module):
             args=args,
             rate=rate,
             rate_at=rate_at,
-            start_rate=self._start_rate(t, h, y0, args),
+            start_rate=start_rate,
             end_rate=end_rate,
         )
 
@@ -341,10 +339,12 @@ class Model(eqx.Module):
         # Impacts at the start are part of the step: predict from the state after them.
         y0 = jax.lax.stop_gradient(self.apply_impacts(t1 - h, h, y0, args)[0])
         rate = self.f(t1, y1, args)
-        ctx = self._context(t1, h, y0, y1, args, rate=rate, end_rate=self.to_state(rate))
-        if ctx.start_rate is None:  # the switching functions' predictions read it too
-            start_rate = self._rate(t1 - h, y0, args)
-            ctx = eqx.tree_at(lambda c: c.start_rate, ctx, start_rate, is_leaf=_is_none)
+        # Both end rates, for every projector (the switching functions' predictions read
+        # them; contacts read the start's as well).
+        start_rate = self._rate(t1 - h, y0, args)
+        ctx = self._context(
+            t1, h, y0, y1, args, rate=rate, start_rate=start_rate, end_rate=self.to_state(rate)
+        )
         return jax.lax.stop_gradient(self.projector.next_event(ctx))
 
     def initial_violation(self, t0, h, y0, args):

@@ -110,6 +110,16 @@ class EventLocated(AbstractProjector):
     def acts_on(self, n: int) -> np.ndarray:
         return self.projector.acts_on(n)
 
+    def _value(self, ctx: ProjectionContext, t, y):
+        # The switching functions at (t, y), at least 1-D, in the state's dtype.
+        return jnp.atleast_1d(self.surface(t, y, ctx.args)).astype(y.dtype)
+
+    def _along(self, ctx: ProjectionContext, t, y, y_dot):
+        # (s, s') at (t, y) with s' = d_t s + grad s . y_dot, the rate along the flow y_dot.
+        t = jnp.asarray(t, y.dtype)
+        value = lambda t, y: self._value(ctx, t, y)
+        return jax.jvp(value, (t, y), (jnp.ones_like(t), jnp.asarray(y_dot, y.dtype)))
+
     def initial_violation(self, ctx: ProjectionContext):
         return self.projector.initial_violation(ctx)
 
@@ -143,10 +153,8 @@ class EventLocated(AbstractProjector):
 
         Without the rates (a context that does not carry them), the secant through $s_0$
         and $s_1$. `inf` where nothing is predicted."""
-        s0 = jnp.atleast_1d(self.surface(ctx.t - ctx.h, ctx.y_prev, ctx.args))
-        s1 = jnp.atleast_1d(self.surface(ctx.t, ctx.y_iter, ctx.args))
-        dtype = ctx.y_iter.dtype
-        s0, s1 = s0.astype(dtype), s1.astype(dtype)
+        s0 = self._value(ctx, ctx.t - ctx.h, ctx.y_prev)
+        s1 = self._value(ctx, ctx.t, ctx.y_iter)
         own = secant_crossing(s0, s1, ctx.h)
         if ctx.start_rate is not None and ctx.end_rate is not None:
             own = self._predict(ctx, s0, s1, own)
@@ -155,14 +163,8 @@ class EventLocated(AbstractProjector):
 
     def _predict(self, ctx: ProjectionContext, s0, s1, secant):
         dtype = s1.dtype
-
-        def rate(t, y, y_dot):
-            t = jnp.asarray(t, dtype)
-            surface = lambda t, y: jnp.atleast_1d(self.surface(t, y, ctx.args)).astype(dtype)
-            return jax.jvp(surface, (t, y), (jnp.ones_like(t), y_dot.astype(dtype)))[1]
-
-        ds0 = rate(ctx.t - ctx.h, ctx.y_prev, ctx.start_rate)
-        ds1 = rate(ctx.t, ctx.y_iter, ctx.end_rate)
+        ds0 = self._along(ctx, ctx.t - ctx.h, ctx.y_prev, ctx.start_rate)[1]
+        ds1 = self._along(ctx, ctx.t, ctx.y_iter, ctx.end_rate)[1]
         h = jnp.where(ctx.h > 0, ctx.h, 1.0)
         tiny = 64 * jnp.finfo(dtype).eps * (1.0 + jnp.maximum(jnp.abs(s0), jnp.abs(s1)))
         away0, away1 = jnp.abs(s0) > tiny, jnp.abs(s1) > tiny
@@ -211,12 +213,8 @@ class EventLocated(AbstractProjector):
             return base, end, found
         t0 = ctx.t - ctx.h
         dtype = ctx.y_prev.dtype
-
-        def surface(t, y):
-            return jnp.atleast_1d(self.surface(t, y, ctx.args)).astype(dtype)
-
-        s0, sdot = jax.jvp(surface, (t0, ctx.y_prev), (jnp.ones_like(t0), ctx.rate))
-        s1 = surface(ctx.t, ctx.y_iter)
+        s0, sdot = self._along(ctx, t0, ctx.y_prev, ctx.rate)
+        s1 = self._value(ctx, ctx.t, ctx.y_iter)
         w0, w1 = ctx.restrict(ctx.y_prev), ctx.restrict(ctx.y_iter)
         jump = w1 - w0
         settled = (self.projector(w1 + jump, ctx) == w1) & (self.projector(w0 - jump, ctx) == w0)
@@ -232,7 +230,7 @@ class EventLocated(AbstractProjector):
         if ctx.rate_at is None:
             transient = jnp.zeros_like(landed)
         else:
-            _, sdot_far = jax.jvp(surface, (t0, y_far), (jnp.ones_like(t0), ctx.rate_at(y_far)))
+            _, sdot_far = self._along(ctx, t0, y_far, ctx.rate_at(y_far))
             transient = landed & (sdot_far * sdot > 0)
         delta = switch_delay(s0, sdot, crossed | transient)
         # A transient landing's base shift is the jump to the far branch (the stage's
@@ -272,14 +270,11 @@ class EventLocated(AbstractProjector):
         dtype = ctx.y_prev.dtype
         idx = np.asarray(ctx.block)
 
-        def surface(t, y):
-            return jnp.atleast_1d(self.surface(t, y, ctx.args)).astype(dtype)
-
         def sdot(w):
             y = ctx.y_prev.at[idx].set(w)
-            return jax.jvp(surface, (t0, y), (jnp.ones_like(t0), ctx.rate_at(y)))[1]
+            return self._along(ctx, t0, y, ctx.rate_at(y))[1]
 
-        s0 = surface(t0, ctx.y_prev)
+        s0 = self._value(ctx, t0, ctx.y_prev)
         eps = jnp.finfo(dtype).eps
         rate, jac = sdot(w0), jax.jacfwd(sdot)(w0)
         tol = 64 * eps * (1.0 + jnp.max(jnp.abs(ctx.y_prev)))
