@@ -9,14 +9,13 @@ of the wall time divided by the steps taken (times the batch size for the batch)
 """
 
 import argparse
-import time
 
 import jax
 import jax.numpy as jnp
 
 import nivpjax as nj
 
-from ._common import block
+from ._common import time_once
 
 
 def _make(steps, t1):
@@ -40,13 +39,9 @@ def _make(steps, t1):
 
 
 def _best(fn, arg, repeats):
-    out = block(fn(arg))
-    best = float("inf")
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        out = block(fn(arg))
-        best = min(best, time.perf_counter() - t0)
-    return best, out
+    # The minimum of `repeats` calls after a warm-up call, and the last output.
+    runs = [time_once(fn, arg) for _ in range(repeats + 1)][1:]
+    return min(seconds for seconds, _ in runs), runs[-1][1]
 
 
 def main(argv=None):
