@@ -6,8 +6,10 @@ from typing import Any
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, Bool, Float
 
+from . import _linalg
 from ._projector import AbstractProjector, ProjectionContext
 from ._tangent import tangent_only
 
@@ -27,6 +29,10 @@ class Model(eqx.Module):
     - `equation_rows`: algebraic rows scaled $\rho_i = \tau_i$ instead (no $1/h$): algebraic
       equations with $O(1)$ sensitivity to their own unknowns (saturations, diodes with
       series resistance). Only the VI method's convergence depends on this; Newton does not.
+    - `has_algebraic`: whether any row is algebraic (static).
+    - `unit_mass`: whether $A$ is the identity on the differential rows and zero on the
+      algebraic ones (static; `Model.build` reads it off a concrete $A$). Products with
+      $A$ and solves with its differential block are then masks.
     """
 
     vector_field: Callable[[Any, Any, Any], Any]
@@ -36,12 +42,37 @@ class Model(eqx.Module):
     tau: Float[Array, " n"] | float = 1.0
     equation_rows: Bool[Array, " n"] | None = None
     has_algebraic: bool = eqx.field(static=True, default=False)
+    unit_mass: bool = eqx.field(static=True, default=False)
+
+    @classmethod
+    def build(cls, vector_field, projector, mass_matrix, algebraic, **kwargs) -> "Model":
+        """A model whose static flags are read off the concrete `algebraic` rows and
+        `mass_matrix` (a NumPy array, or `None` for the identity; stored as a JAX array
+        of the same dtype)."""
+        algebraic = np.asarray(algebraic, bool)
+        unit = True
+        if mass_matrix is not None:
+            unit = bool(np.array_equal(mass_matrix, np.diag((~algebraic).astype(float))))
+            mass_matrix = jnp.asarray(mass_matrix)
+        return cls(
+            vector_field=vector_field,
+            projector=projector,
+            mass_matrix=mass_matrix,
+            algebraic=algebraic,
+            has_algebraic=bool(algebraic.any()),
+            unit_mass=unit,
+            **kwargs,
+        )
 
     def f(self, t, y, args):
         return jnp.asarray(self.vector_field(t, y, args), y.dtype)
 
     def mass_times(self, v):
-        return v if self.mass_matrix is None else self.mass_matrix @ v
+        if self.mass_matrix is None:
+            return v
+        if self.unit_mass:
+            return jnp.where(self.algebraic, 0.0, v)
+        return self.mass_matrix @ v
 
     def _rate(self, t, y, args):
         """$y'$ on differential rows (zero on algebraic rows): $A_{dd}^{-1} f_d$."""
@@ -51,10 +82,10 @@ class Model(eqx.Module):
         """$A_{dd}^{-1} v_d$ on differential rows, zero on algebraic rows: turns a vector in
         the units of $f$ (a rate, a reaction, an error of $A y$) into state units."""
         v = jnp.where(self.algebraic, 0.0, v)
-        if self.mass_matrix is None:
+        if self.mass_matrix is None or self.unit_mass:
             return v
         A = self.mass_matrix + jnp.diag(self.algebraic.astype(v.dtype))
-        return jnp.linalg.solve(A, v)
+        return _linalg.solve_or_nan(A, v)
 
     def reaction(self, multipliers):
         """The constraint reaction of a stage (its residual, per unit time, in the units of

@@ -128,14 +128,13 @@ def solve(
     t1 = v.as_array(t1, dtype)
     error_mask = v.check_error_mask(controller, algebraic, n)
     t_eval = v.check_t_eval(t_eval, dtype, t0_c, t1_c)
-    model = Model(
-        vector_field=vector_field,
-        projector=projector,
-        mass_matrix=mass,
-        algebraic=algebraic,
+    model = Model.build(
+        vector_field,
+        projector,
+        mass,
+        algebraic,
         tau=float(tau_arr) if tau_arr.shape == () else jnp.asarray(tau_arr, dtype),
         equation_rows=equation_rows,
-        has_algebraic=bool(algebraic.any()),
     )
     traced = v.is_traced((y0, t0, t1, args, t_eval, h0))
     call = _solve_jit.prepare(

@@ -78,7 +78,7 @@ def check_mass_matrix(mass_matrix, n, dtype):
     algebraic = np.all(A == 0, axis=1)
     if np.array_equal(A, np.eye(n)):
         return None, algebraic
-    return jnp.asarray(A, dtype), algebraic
+    return A.astype(dtype), algebraic
 
 
 def check_vector_field(vector_field, t0, y0, args):

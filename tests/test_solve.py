@@ -115,6 +115,30 @@ def test_dae_mass_matrix():
     assert abs(z - 2 * x) <= 1e-12 * abs(z)  # the algebraic row, to round-off
 
 
+def test_unit_mass_matrix_masks_as_the_general_path_solves():
+    """A = diag(1, 0) takes the masked path (`Model.unit_mass`), A = diag(2, 0) with the
+    differential row scaled by 2 the general one (products and solves with A): the same
+    DAE, so the same steps and the same solution to round-off."""
+
+    def field(scale):
+        return lambda t, y, args: jnp.stack([scale * (-y[0] + y[1]), y[1] - 2.0 * y[0]])
+
+    runs = [
+        nj.solve(
+            field(scale),
+            0.0,
+            1.0,
+            jnp.array([1.0, 2.0]),
+            mass_matrix=np.diag([scale, 0.0]),
+            controller=nj.PIDController(rtol=1e-6, atol=1e-9),
+        )
+        for scale in (1.0, 2.0)
+    ]
+    assert [int(r.n_accepted) for r in runs] == [int(runs[0].n_accepted)] * 2
+    np.testing.assert_allclose(runs[0].y_final, runs[1].y_final, rtol=1e-12)
+    np.testing.assert_allclose(runs[0].y_final[0], np.e, rtol=1e-4)
+
+
 def test_vmap_equals_loop():
     ctrl = nj.PIDController(rtol=1e-6, atol=1e-8)
     run = jax.jit(

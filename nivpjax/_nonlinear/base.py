@@ -7,11 +7,11 @@ from collections.abc import Callable
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import lineax as lx
 import numpy as np
 from jax import lax
 from jaxtyping import Array, Float, Int
 
+from .. import _linalg
 from .._results import RESULTS
 from .._tangent import tangent_only
 
@@ -68,16 +68,16 @@ def effective_tolerances(rtol, atol, dtype):
 
 
 def dense_solve(J, b):
-    """Dense LU solve through lineax; returns the solution and whether it is usable."""
-    sol = lx.linear_solve(lx.MatrixLinearOperator(J), b, lx.LU(), throw=False)
-    ok = (sol.result == lx.RESULTS.successful) & jnp.all(jnp.isfinite(sol.value))
-    return sol.value, ok
+    """Dense LU solve (see `nivpjax._linalg.solve`); returns the solution and whether it is
+    usable."""
+    return _linalg.solve(J, b)
 
 
 def _tangent_solve(g, b):
     # g is the linearisation of G at the solution (its generalised Jacobian, with the
-    # projectors' custom-JVP elements); solve g(x) = b densely.
-    J = jax.jacfwd(g)(b)
+    # projectors' custom-JVP elements); solve g(x) = b densely. The Jacobian is taken at
+    # zero, so that nothing but the solve touches `b`: reverse mode transposes this in `b`.
+    J = jax.jacfwd(g)(jnp.zeros_like(b))
     x, _ = dense_solve(J, b)
     return x
 

@@ -8,6 +8,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .. import _linalg
 from .base import AbstractProjector, ProjectionContext, switch_delay
 from .predict import first_root, secant_crossing
 
@@ -286,7 +287,7 @@ class EventLocated(AbstractProjector):
         on = near & (jnp.abs(jnp.diagonal(jac)) > eps * scale)
         pair = on[:, None] & on[None, :]
         eye = jnp.eye(w0.size, dtype=dtype)
-        step = jnp.linalg.solve(jnp.where(pair, jac, eye), jnp.where(on, rate, 0.0))
+        step = _linalg.solve_or_nan(jnp.where(pair, jac, eye), jnp.where(on, rate, 0.0))
         w = jnp.where(on, self.projector(w0 - step, ctx), w0)
         # The skipped time keeps its derivative (d tau = -d s0 / sdot): the model moves the
         # start along the jump of the rate by it (zero in value), the saltation term of the

@@ -102,14 +102,13 @@ class Task(eqx.Module):
         A = scene.full_mass_matrix
         algebraic = np.zeros(scene.size, bool) if A is None else np.all(A == 0, axis=1)
         rows = scene.equation_rows
-        model = Model(
-            vector_field=scene.vector_field,
-            projector=scene.projector,
-            mass_matrix=None if A is None else jnp.asarray(A),
-            algebraic=jnp.asarray(algebraic),
+        model = Model.build(
+            scene.vector_field,
+            scene.projector,
+            A,
+            algebraic,
             tau=1.0,
             equation_rows=None if rows is None else jnp.asarray(rows),
-            has_algebraic=bool(algebraic.any()),
         )
         return model, jnp.asarray(~algebraic)
 
