@@ -13,10 +13,8 @@ class SemismoothNewton(AbstractNonlinearSolver):
     r"""Semismooth Newton on $G(y) = y - P(y - \rho R(y))$.
 
     Each iteration forms the generalised Jacobian $I - D(I - \rho J_R)$ by forward-mode
-    differentiation of $G$ (the projectors' custom JVPs supply $D$; one pass gives $G$ and
-    its Jacobian at each trial point), solves densely (LU with partial pivoting: unrolled
-    array operations up to 8 unknowns, lineax beyond), and globalises with a backtracking
-    Armijo line search on the merit
+    differentiation of $G$ (the projectors' custom JVPs supply $D$), solves densely with
+    lineax (LU), and globalises with a backtracking Armijo line search on the merit
     $\tfrac12|G|^2$: accept $\alpha$ when
     $\tfrac12|G(y + \alpha d)|^2 \le (1 - 2\sigma\alpha)\tfrac12|G(y)|^2$.
 
@@ -45,25 +43,13 @@ class SemismoothNewton(AbstractNonlinearSolver):
 
     def _iterate(self, residual, project, rho, y0, rtol, atol):
         G = natural_map(residual, project, rho)
-
-        def value_and_jacobian(y):
-            # One forward-mode pass: G's value and its generalised Jacobian together.
-            def both(v):
-                g = G(v)
-                return g, g
-
-            J, g = jax.jacfwd(both, has_aux=True)(y)
-            return g, J
-
-        def direction(g, J):
-            d, ok = dense_solve(J, -g)
-            return jnp.where(ok, d, -g)
+        G0 = G(y0)
 
         def merit(g):
             return 0.5 * jnp.sum(g**2)
 
         def cond(carry):
-            y, g, _, _, k, _, _ = carry
+            y, g, k, history = carry
             return (
                 (k < self.max_steps)
                 # At least one iteration: with a tiny step the whole update of the stage can
@@ -74,34 +60,33 @@ class SemismoothNewton(AbstractNonlinearSolver):
             )
 
         def body(carry):
-            # One trial point: the Newton step from the last accepted iterate `y`, scaled by
-            # `alpha`. Accepted (a Newton iteration) when the watchdog allows the full step
-            # or the merit falls enough, or after `max_backtracks` backtracks; otherwise
-            # `alpha` shrinks. The line search is this same loop, so each trial costs one
-            # forward pass, which also yields the next Newton direction.
-            y, g, d, alpha, k, j, history = carry
-            y_try = y + alpha * d
-            g_try, J_try = value_and_jacobian(y_try)
+            y, g, k, history = carry
+            J = jax.jacfwd(G)(y)
+            d, ok = dense_solve(J, -g)
+            d = jnp.where(ok, d, -g)
+            m0 = merit(g)
             watchdog = k < self.full_steps
-            sufficient = merit(g_try) <= (1 - 2 * self.sigma * alpha) * merit(g)
-            good = jnp.all(jnp.isfinite(g_try)) & (watchdog | sufficient)
-            accept = good | (j >= self.max_backtracks)
-            k_new = k + accept.astype(k.dtype)
-            norm = jnp.max(jnp.abs(g_try), initial=0.0)
-            drop = jnp.where(accept, k_new, self.max_steps + 1)
-            return (
-                jnp.where(accept, y_try, y),
-                jnp.where(accept, g_try, g),
-                jnp.where(accept, direction(g_try, J_try), d),
-                jnp.where(accept, 1.0, self.beta * alpha).astype(alpha.dtype),
-                k_new,
-                jnp.where(accept, 0, j + 1),
-                history.at[drop].set(norm, mode="drop"),
-            )
 
-        g0, J0 = value_and_jacobian(y0)
-        history = init_history(self.max_steps, y0.dtype, jnp.max(jnp.abs(g0), initial=0.0))
-        one = jnp.ones((), y0.dtype)
-        init = (y0, g0, direction(g0, J0), one, jnp.array(0), jnp.array(0), history)
-        y, _, _, _, k, _, history = lax.while_loop(cond, body, init)
+            def ls_cond(ls):
+                alpha, y_try, g_try, j = ls
+                m_try = merit(g_try)
+                finite = jnp.all(jnp.isfinite(g_try))
+                good = finite & (watchdog | (m_try <= (1 - 2 * self.sigma * alpha) * m0))
+                return ~good & (j < self.max_backtracks)
+
+            def ls_body(ls):
+                alpha, _, _, j = ls
+                alpha = self.beta * alpha
+                y_try = y + alpha * d
+                return alpha, y_try, G(y_try), j + 1
+
+            one = jnp.ones((), y.dtype)
+            y1 = y + d
+            _, y_new, g_new, _ = lax.while_loop(ls_cond, ls_body, (one, y1, G(y1), 0))
+            k = k + 1
+            history = history.at[k].set(jnp.max(jnp.abs(g_new), initial=0.0))
+            return y_new, g_new, k, history
+
+        history = init_history(self.max_steps, y0.dtype, jnp.max(jnp.abs(G0), initial=0.0))
+        y, _, k, history = lax.while_loop(cond, body, (y0, G0, jnp.array(0), history))
         return y, (k.astype(y.dtype), history)
