@@ -14,8 +14,8 @@ class SemismoothNewton(AbstractNonlinearSolver):
 
     Each iteration forms the generalised Jacobian $I - D(I - \rho J_R)$ by forward-mode
     differentiation of $G$ (the projectors' custom JVPs supply $D$), solves densely (LU
-    with partial pivoting: unrolled up to 8 unknowns, lineax beyond), and globalises with a backtracking Armijo line search on the merit
-    $\tfrac12|G|^2$: accept $\alpha$ when
+    with partial pivoting: unrolled up to 8 unknowns, lineax beyond), and globalises with a
+    backtracking Armijo line search on the merit $\tfrac12|G|^2$: accept $\alpha$ when
     $\tfrac12|G(y + \alpha d)|^2 \le (1 - 2\sigma\alpha)\tfrac12|G(y)|^2$.
 
     The first `full_steps` iterations take the full Newton step whenever it is finite
