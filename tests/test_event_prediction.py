@@ -6,6 +6,7 @@ from pathlib import Path
 
 import equinox as eqx
 import numpy as np
+import pytest
 
 import nivpjax as nj
 
@@ -135,3 +136,33 @@ def test_micro_bounces_do_not_fall_through_the_floor():
     ys = np.asarray(sol.trimmed().ys)
     assert np.max(np.abs(ys[:, 1])) <= abs(v0) * (1 + 1e-6)  # before: 1.6e-3
     assert np.min(ys[:, 0]) >= -1e-12  # before: -1.4e-7
+
+
+@pytest.mark.xfail(
+    raises=AssertionError, strict=True, reason="known: a contact at the edge of its round-off band"
+)
+def test_rejection_only_location_near_the_round_off_band():
+    """Known failure, kept visible: without prediction, a ball 10% above the contact's
+    round-off band 16 eps (1 + |y|) at 6.8e-6 m/s ends at `h_min` (loudly, not silently).
+    The step's start counts the contact as open; a stage that ends inside the band counts
+    it closed and Bathe charges the whole velocity jump as a late impact, whatever the
+    step size, so only steps that stay above the band are accepted and the ball creeps
+    towards it. Charging a stage's late impact by its timing (as `apply_impacts` charges
+    an early one) instead of the whole jump would fix it. With prediction (the default)
+    the same start takes 23 steps."""
+    import jax.numpy as jnp
+
+    scene, _, args = nj.scenes.bouncing_ball(E)
+    v0 = -6.789463e-06
+    q0 = 1.1 * 16 * np.finfo(float).eps * (1 + abs(v0))
+    controller = nj.PIDController(rtol=1e-6, atol=1e-8, event_prediction=False)
+    sol = scene.solve(
+        4.0637,
+        4.064,
+        jnp.array([q0, v0]),
+        args,
+        controller=controller,
+        max_steps=400,
+        throw=False,
+    )
+    assert sol.result == nj.RESULTS.successful, nj.RESULTS[sol.result]
