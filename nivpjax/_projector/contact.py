@@ -102,20 +102,34 @@ class UnilateralContact(AbstractProjector):
         eps = jnp.finfo(u_minus.dtype).eps
         return jnp.sqrt(eps) * (1.0 + jnp.max(jnp.abs(u_minus), initial=0.0))
 
+    @staticmethod
+    def _roundoff_gap(y, dtype):
+        # The round-off of a gap computed from positions of the state's size.
+        return 16 * jnp.finfo(dtype).eps * (1.0 + jnp.max(jnp.abs(y), initial=0.0))
+
     @classmethod
     def _closed(cls, gap0, u_minus, y0, h):
-        # Closed up to round-off: the round-off of a gap computed from positions of the
-        # state's size, or the distance a round-off velocity covers in the step. A resting
-        # body whose gap drifted above zero by the trapezoidal rule's rounding (~1e-17) or
-        # by an iterative solver's tolerance (the VI method's 1e-10) stays in contact
-        # instead of falling for a step and micro-bouncing.
-        eps = jnp.finfo(gap0.dtype).eps
-        scale = 1.0 + jnp.max(jnp.abs(y0), initial=0.0)
-        return gap0 <= jnp.maximum(16 * eps * scale, h * cls._roundoff_velocity(u_minus))
+        # Closed up to round-off: the round-off of the gap, or the distance a round-off
+        # velocity covers in the step. A resting body whose gap drifted above zero by the
+        # trapezoidal rule's rounding (~1e-17) or by an iterative solver's tolerance (the VI
+        # method's 1e-10) stays in contact instead of falling for a step and micro-bouncing.
+        band = cls._roundoff_gap(y0, gap0.dtype)
+        return gap0 <= jnp.maximum(band, h * cls._roundoff_velocity(u_minus))
 
     @classmethod
     def _resting(cls, gap0, u_minus, y0, h):
         return cls._closed(gap0, u_minus, y0, h) & (u_minus <= cls._roundoff_velocity(u_minus))
+
+    def _end(self, ctx: ProjectionContext, Wt, dtype):
+        # Gaps and normal velocities at the end of the step, with the normals of its start.
+        gap1 = jnp.atleast_1d(jnp.asarray(self.gap(ctx.t, ctx.y_iter, ctx.args), dtype))
+        return gap1, Wt @ ctx.restrict(ctx.y_iter)
+
+    @staticmethod
+    def _end_acceleration(ctx: ProjectionContext, Wt, dtype):
+        # Normal accelerations of the vector field at the end of the step (`ctx.rate`).
+        rate = jnp.zeros_like(ctx.y_iter) if ctx.rate is None else ctx.rate
+        return Wt @ ctx.restrict(jnp.asarray(rate, dtype))
 
     def _impacts(self, ctx: ProjectionContext, dtype):
         # Active contacts approaching faster than round-off at the start of the stage.
@@ -141,16 +155,13 @@ class UnilateralContact(AbstractProjector):
         falling through the floor with an error of round-off)."""
         dtype = ctx.y_iter.dtype
         Wt, _, gap0, u_minus, _ = self._start(ctx, dtype)
-        gap1 = jnp.atleast_1d(jnp.asarray(self.gap(ctx.t, ctx.y_iter, ctx.args), dtype))
+        gap1, u1 = self._end(ctx, Wt, dtype)
+        a1 = self._end_acceleration(ctx, Wt, dtype)
         is_open = ~self._closed(gap0, u_minus, ctx.y_prev, ctx.h)
         depth0, depth1 = jnp.maximum(-gap0, 0.0), jnp.maximum(-gap1, 0.0)
-        eps = jnp.finfo(dtype).eps
-        tiny = 16 * eps * (1.0 + jnp.max(jnp.abs(ctx.y_prev), initial=0.0))
+        tiny = self._roundoff_gap(ctx.y_prev, dtype)
         grew = depth1 > depth0 + tiny
         depth = jnp.where(is_open | grew, depth1, 0.0)
-        u1 = Wt @ ctx.restrict(ctx.y_iter)
-        rate = jnp.zeros_like(ctx.y_iter) if ctx.rate is None else ctx.rate
-        a1 = Wt @ ctx.restrict(jnp.asarray(rate, dtype))
         e = jnp.broadcast_to(resolve(self.restitution, ctx, dtype), u1.shape)
         # Depths within round-off of the gap locate nothing (float32: 2e-6 m at 1 m).
         approaching = (u1 < -self._roundoff_velocity(u1)) & (depth > tiny)
@@ -177,8 +188,8 @@ class UnilateralContact(AbstractProjector):
         d v(T)/d g off by 2.2e-3 relative on a plastic contact at rtol 1e-4)."""
         dtype = ctx.y_iter.dtype
         Wt0, _, gap0, u0, _ = self._start(ctx, dtype)
-        rate = jnp.zeros_like(ctx.y_iter) if ctx.rate is None else ctx.rate
-        a = Wt0 @ ctx.restrict(rate)
+        gap1, u1 = self._end(ctx, Wt0, dtype)
+        a = self._end_acceleration(ctx, Wt0, dtype)
         resting0 = self._resting(gap0, u0, ctx.y_prev, ctx.h)
         if ctx.start_rate is None:
             lift_off = jnp.inf
@@ -187,8 +198,6 @@ class UnilateralContact(AbstractProjector):
             lift = jnp.where(resting0, secant_crossing(a0, a, ctx.h), jnp.inf)
             lift_off = jnp.min(lift, initial=jnp.inf)
         from_start = jnp.min(jnp.where(resting0, jnp.inf, first_root(gap0, u0, a)), initial=jnp.inf)
-        gap1 = jnp.atleast_1d(jnp.asarray(self.gap(ctx.t, ctx.y_iter, ctx.args), dtype))
-        u1 = Wt0 @ ctx.restrict(ctx.y_iter)
         e = jnp.broadcast_to(resolve(self.restitution, ctx, dtype), u1.shape)
         closing = (gap1 + self.lookahead * ctx.h * u1 <= 0) & (u1 < 0)
         gap1 = jnp.where(closing, jnp.maximum(gap1, 0.0), gap1)
@@ -231,8 +240,7 @@ class UnilateralContact(AbstractProjector):
         opens without a jump of the rate."""
         dtype = ctx.y_iter.dtype
         Wt, _, gap0, u0, _ = self._start(ctx, dtype)
-        gap1 = jnp.atleast_1d(jnp.asarray(self.gap(ctx.t, ctx.y_iter, ctx.args), dtype))
-        u1 = Wt @ ctx.restrict(ctx.y_iter)
+        gap1, u1 = self._end(ctx, Wt, dtype)
         resting0 = self._resting(gap0, u0, ctx.y_prev, ctx.h)
         resting1 = self._resting(gap1, u1, ctx.y_iter, ctx.h)
         return jnp.any(resting0 != resting1)
