@@ -56,7 +56,7 @@ def _factor(A):
         nonsingular = nonsingular & (pivot != 0)
         below = rows > k
         factors = jnp.where(below, A[:, k] / jnp.where(pivot != 0, pivot, 1.0), 0.0)
-        A = A - factors[:, None] * jnp.where(rows > k, A[k], 0.0)[None, :]
+        A = A - factors[:, None] * jnp.where(below, A[k], 0.0)[None, :]  # columns > k
         A = A.at[:, k].set(jnp.where(below, factors, A[:, k]))
     return A, perm, nonsingular
 
