@@ -5,7 +5,13 @@ import jax.numpy as jnp
 
 from .._nonlinear import AbstractNonlinearSolver
 from .._solution import StepStats
-from .base import AbstractStepper, StepOutput, default_solver, stats_of
+from .base import (
+    AbstractStepper,
+    Stage,
+    StepOutput,
+    chained_stages,
+    default_solver,
+)
 
 
 def error_constant(gamma):
@@ -82,29 +88,34 @@ class Bathe(AbstractStepper):
         t_mid = t0 + g * h
         t1 = t0 + h
         y0, f0, start_error = model.step_start(t0, h, y0, args)
-        sol1, mult1 = model.solve_stage(self.solver, t_mid, g * h, y0, f0, 0.5, y0, y0, args)
-        y_mid = sol1.value
         c1 = (1 - g) / g
         c2 = -1 / (g * (1 - g))
         c3 = (2 - g) / (1 - g)
-        # c1 + c2 + c3 = 0: the stage is a backward Euler step of size h/c3 from an affine
-        # combination of the two earlier points.
-        # After a switch in the first stage, y0 moves (in derivatives only) by the
-        # switch's saltation term, as y_mid did: otherwise the backward difference would
-        # weigh that term 1/(gamma (2 - gamma)) times.
-        y0_post = y0 + model.switch_jump(t0, y0, t_mid, y_mid, args)
-        y_base = -(c1 * y0_post + c2 * y_mid) / c3
-        h_eff = h / c3
-        # After an impulse or a change of face in the first stage the three points do not
-        # lie on one smooth curve: restart the second stage as backward Euler from y_mid.
-        impulsive = model.impulsive(t_mid, g * h, y0, y_mid, args)
-        restart = impulsive | model.switched(t_mid, g * h, y0, y_mid, args)
-        y_base = jnp.where(restart, y_mid, y_base)
-        h_eff = jnp.where(restart, (1 - g) * h, h_eff)
-        sol2, multipliers = model.solve_stage(
-            self.solver, t1, h_eff, y_base, None, 1.0, y_mid, y_mid, args
-        )
-        y1 = sol2.value
+
+        def follow(stage, sol, _):
+            # The backward-difference stage after the trapezoidal one. c1 + c2 + c3 = 0:
+            # it is a backward Euler step of size h/c3 from an affine combination of the
+            # two earlier points. (After the second stage: whether it contained an impact,
+            # the rest is dropped.)
+            y_mid = sol.value
+            impulsive = model.impulsive(stage.t_end, stage.h_eff, stage.y_prev, y_mid, args)
+            # After a switch in the first stage, y0 moves (in derivatives only) by the
+            # switch's saltation term, as y_mid did: otherwise the backward difference
+            # would weigh that term 1/(gamma (2 - gamma)) times.
+            y0_post = y0 + model.switch_jump(t0, y0, t_mid, y_mid, args)
+            y_base = -(c1 * y0_post + c2 * y_mid) / c3
+            # After an impulse or a change of face in the first stage the three points do
+            # not lie on one smooth curve: restart the second stage as backward Euler from
+            # y_mid.
+            switched = model.switched(stage.t_end, stage.h_eff, stage.y_prev, y_mid, args)
+            restart = impulsive | switched
+            y_base = jnp.where(restart, y_mid, y_base)
+            h_eff = jnp.where(restart, (1 - g) * h, h / c3)
+            return Stage.of(t1, h_eff, y_base, 1.0, y_mid), (impulsive, restart)
+
+        first = Stage.of(t_mid, g * h, y0, 0.5, y0)
+        stages = chained_stages(model, self.solver, f0, first, follow, 2, args)
+        (y_mid, stats1, mult1, (_, restart)), (y1, stats2, multipliers, (late_impact, _)) = stages
         f_mid = model.f(t_mid, y_mid, args)
         f1 = model.f(t1, y1, args)
         r_a, r_b = model.reaction(mult1), model.reaction(multipliers)
@@ -119,9 +130,9 @@ class Bathe(AbstractStepper):
             # An impact inside the step (a contact crossed in the first stage and bounced
             # by the second): charge the jump it made, so the step is shortened to land
             # before that contact.
-            late_impact = model.impulsive(t1, h_eff, y_mid, y1, args)
+            h_eff = jnp.where(restart, (1 - g) * h, h / c3)
             e = jnp.where(late_impact, e + h_eff * r_b, e)
-        stats = StepStats.combine(stats_of(sol1), stats_of(sol2))
+        stats = StepStats.combine(stats1, stats2)
         return StepOutput(
             y1=y1,
             y_error=model.to_state(e) + start_error,
