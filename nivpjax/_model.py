@@ -247,6 +247,17 @@ class Model(eqx.Module):
         located to the tolerance."""
         if not self.has_impulses:
             return y0, jnp.zeros_like(y0)
+        y_plus, tau, saltation = self._impact(t0, h, y0, args)
+        # Only an early impact (the contact closes later) can be fixed by a shorter step;
+        # a late one (the previous step ended penetrated) was charged by its violation.
+        return y_plus, jnp.maximum(tau, 0.0) * saltation
+
+    def _impact(self, t0, h, y0, args):
+        # The impacts at the start of a stage from (t0, y0) of length h: the state after
+        # them (with the event sensitivity of `apply_impacts`), the time tau at which the
+        # flow meets the contact (zero without an impact, negative when y0 is already
+        # penetrated; no gradient) and the saltation term f+ - DI f- (no gradient): the
+        # local error of applying the impact tau early is tau (f+ - DI f-) to first order.
         t1 = t0 + h
         ctx0 = self._context(t1, h, y0, y0, args)
         tau, found = self.projector.event_time(ctx0)
@@ -258,13 +269,34 @@ class Model(eqx.Module):
         impact_of = lambda y: self.projector.impact(self._context(t1, h, y, y, args))  # noqa: E731
         y_plus, carried = jax.jvp(impact_of, (y_shift,), (sg(rate_minus),))
         rate_plus = self._rate(t0, y_plus, args)
-        # Only an early impact (the contact closes later) can be fixed by a shorter step.
-        # Its error is the saltation term: the flow after the impact from the impact of the
-        # flow, f+ - DI f-; the impact map's own derivative matters (a velocity-level law
-        # reflects the approaching acceleration too: (1 + e) g tau on a bouncing ball).
-        tau_value = jnp.where(found, jnp.maximum(sg(tau), 0.0), 0.0)
-        timing_error = sg(tau_value * (rate_plus - carried))
-        return y_plus - rate_plus * delta, timing_error
+        # The saltation term: the flow after the impact from the impact of the flow; the
+        # impact map's own derivative matters (a velocity-level law reflects the
+        # approaching acceleration too: (1 + e) g tau on a bouncing ball).
+        tau_value = jnp.where(found, sg(tau), 0.0)
+        return y_plus - rate_plus * delta, tau_value, sg(rate_plus - carried)
+
+    def stage_impact_error(self, t0, h, y0, change, args):
+        r"""The local error of a stage from `(t0, y0)` of length `h` that applies an impact
+        at its start (a later stage of a multistage step that starts at, or just before, a
+        contact closing), given `change`, the state change its reaction made (its
+        multipliers times `h`, in state units). Two parts:
+
+        - the timing, $\tau\,(f^+ - D I\,f^-)$, $\tau$ the time from the stage start to
+          the contact's closing: negative when the stage starts penetrated (the impact
+          comes late), zero for a gap closed to round-off;
+        - what the reaction did beyond the impact's jump $I(y_0) - y_0$: a velocity-level
+          contact enforces $u_1 \ge -e\,u^-$ at the stage's end, so after the impact it
+          holds the body against the flow for the rest of the stage ($h\,|a|$ on its
+          normal velocity, $a$ the normal acceleration), where the body should fly.
+
+        Both are the computed state minus the exact one, to first order, so they add with
+        their signs (a late impact and the holding both leave a bouncing ball too fast).
+        Zero without an impact."""
+        if not self.has_impulses:
+            return jnp.zeros_like(y0)
+        y_plus, tau, saltation = self._impact(t0, h, y0, args)
+        held = jax.lax.stop_gradient(change - (y_plus - y0))
+        return tau * saltation + held
 
     def _switch_shifts(self, t_start, y_start, t_end, args):
         # The base-point and end-point shifts of a switching stage as functions of the

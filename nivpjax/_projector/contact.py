@@ -228,8 +228,9 @@ class UnilateralContact(AbstractProjector):
         gap0, u_minus, impact = self._impacts(ctx, ctx.y_prev.dtype)
         tau = jnp.where(impact, -gap0 / jnp.where(impact, u_minus, -1.0), jnp.inf)
         # A gap closed to round-off locates nothing: its tau is zero in value (its
-        # derivative, how the landing moves with the data, is kept).
-        closed = self._closed(gap0, u_minus, ctx.y_prev, ctx.h)
+        # derivative, how the landing moves with the data, is kept). A deeper penetration
+        # gives tau < 0: how late the impact comes.
+        closed = self._closed(jnp.abs(gap0), u_minus, ctx.y_prev, ctx.h)
         tau = jnp.where(closed & impact, tau - jax.lax.stop_gradient(tau), tau)
         found = jnp.any(impact)
         return jnp.where(found, jnp.min(tau), 0.0), found

@@ -125,17 +125,21 @@ class Bathe(AbstractStepper):
         r_mid = r0 + g * (r_b - r0)
         smooth = bathe_error(g, h, f0 + r0, f_mid + r_mid, f1 + r_b)
         split = 0.5 * (1 - g) * h * (f1 - f_mid) + 0.5 * g * h * (f_mid - f0)
-        e = jnp.where(restart, split, smooth)
+        e = model.to_state(jnp.where(restart, split, smooth))
         if model.has_impulses:
-            # An impact inside the step (a contact crossed in the first stage and bounced
-            # by the second): charge the jump it made, so the step is shortened to land
-            # before that contact.
+            # An impact inside the step (a contact closed by the end of the first stage,
+            # or about to close, and bounced by the second from its start): charge its
+            # timing and the stage's holding the body after it, not the whole jump (that
+            # rejects every step whose first stage ends within the contact's round-off
+            # band, at any step size: the step then stalls there).
             h_eff = jnp.where(restart, (1 - g) * h, h / c3)
-            e = jnp.where(late_impact, e + h_eff * r_b, e)
+            change = model.to_state(h_eff * r_b)
+            late = model.stage_impact_error(t1 - h_eff, h_eff, y_mid, change, args)
+            e = jnp.where(late_impact, e + late, e)
         stats = StepStats.combine(stats1, stats2)
         return StepOutput(
             y1=y1,
-            y_error=model.to_state(e) + start_error,
+            y_error=e + start_error,
             multipliers=multipliers,
             stats=stats,
         )
