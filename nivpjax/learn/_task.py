@@ -15,6 +15,7 @@ from .._results import RESULTS
 from .._scene import Scene
 from .._solution import Solution
 from .._stepper import AbstractStepper, Bathe, Richardson
+from .._validate import check_mass_matrix
 
 
 class Task(eqx.Module):
@@ -99,8 +100,7 @@ class Task(eqx.Module):
     def model(self) -> tuple[Model, Any]:
         """The assembled [`nivpjax.Model`][] and error mask (what `solve` builds)."""
         scene = self.scene
-        A = scene.full_mass_matrix
-        algebraic = np.zeros(scene.size, bool) if A is None else np.all(A == 0, axis=1)
+        A, algebraic = check_mass_matrix(scene.full_mass_matrix, scene.size, np.float64)
         rows = scene.equation_rows
         model = Model.build(
             scene.vector_field,
