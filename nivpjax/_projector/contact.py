@@ -11,6 +11,9 @@ from .lcp import lcp_solve
 from .predict import first_root, secant_crossing
 
 
+_LANDED = 1e-2
+
+
 class UnilateralContact(AbstractProjector):
     r"""Impacts and resting contact for any number of contacts at once, at velocity level.
 
@@ -199,7 +202,14 @@ class UnilateralContact(AbstractProjector):
             lift_off = jnp.min(lift, initial=jnp.inf)
         from_start = jnp.min(jnp.where(resting0, jnp.inf, first_root(gap0, u0, a)), initial=jnp.inf)
         e = jnp.broadcast_to(resolve(self.restitution, ctx, dtype), u1.shape)
-        closing = (gap1 + self.lookahead * ctx.h * u1 <= 0) & (u1 < 0)
+        # A step that ended within 1% of its size before a contact closes has landed on
+        # it (the controllers step over so near an event, and the next step applies the
+        # impact at its start). One that ended further away has not: predict that landing.
+        # (Predicting the flight after it instead, whenever the next step's lookahead
+        # would apply the impact, charged that impact's timing at every retry: a cascade
+        # of 5 to 20 rejections, measured on balls whose step fell short of a contact.)
+        landed = (gap1 <= 0) | (first_root(gap1, u1, a) <= _LANDED * ctx.h)
+        closing = (gap1 + self.lookahead * ctx.h * u1 <= 0) & (u1 < 0) & landed
         gap1 = jnp.where(closing, jnp.maximum(gap1, 0.0), gap1)
         u1 = jnp.where(closing, -e * u1, u1)
         resting1 = self._resting(gap1, u1, ctx.y_iter, ctx.h)
