@@ -100,22 +100,18 @@ def _ball_attempts(restitution):
     return sol.n_accepted, sol.n_rejected, sol.result == nj.RESULTS.successful
 
 
-def test_steps_short_of_a_contact_land_on_it():
-    """Balls whose step fell short of a contact: e = 0.946 ended a free-flight step
-    0.13 s short of the floor, e = 0.915 0.026 s short. The controller stepped over the
-    predicted landing (1% of a proposal grown tenfold), and the contact predicted the
-    flight after the impact, which the next step's start applied early, charged at every
-    retry until the step was below twice that distance: 29 accepted and 22 rejected
-    attempts, and 15 and 3, against 10 to 13 for their neighbours (a batch of 1000 balls
-    at e in [0.8, 0.95] wasted 77% of its loop). Now both land on the contact (measured
-    13 and 1, 15 and 1)."""
+def test_a_step_short_of_a_contact_lands_on_it():
+    """A ball (e = 0.946) whose free-flight step ended 0.13 s short of the floor: the
+    contact predicted the flight after the impact (the next step's lookahead would apply
+    it), so the next step's start applied the impact 0.13 s early, charged and rejected at
+    every retry until the step was below twice that distance: 29 accepted and 22 rejected
+    attempts, against 10 to 13 for its neighbours (a batch of 1000 balls at e in
+    [0.8, 0.95] wasted 77% of its loop). It now predicts that landing (measured 13 and 1)."""
     import jax.numpy as jnp
 
-    for e, usual in ((0.946329946764023, 13), (0.914647965697649, 15)):
-        accepted, rejected, ok = _ball_attempts(jnp.asarray(e))
-        assert bool(ok)
-        assert int(rejected) <= 2, (e, int(accepted), int(rejected))
-        assert int(accepted) <= usual + 1, (e, int(accepted), int(rejected))
+    accepted, rejected, ok = _ball_attempts(jnp.asarray(0.946329946764023))
+    assert bool(ok)
+    assert int(rejected) <= 2 and int(accepted) <= 14, (int(accepted), int(rejected))
 
 
 def test_impact_applied_early_charges_the_saltation_term():

@@ -14,9 +14,8 @@ def land_before_event(info: StepInfo, accept, ok, h_next, margin):
     event the projector predicts (`info.next_event`, measured from `info.t0`).
 
     - After an acceptance the next step starts at `t0 + h`; after a rejection, at `t0`.
-    - A step that would start within `EVENT_SKIP` of its size (and of the attempt's) from
-      the event steps over it: the event then sits at the start of the step, where the
-      scheme resolves it.
+    - A step that would start within `EVENT_SKIP` of its size from the event steps over it:
+      the event then sits at the start of the step, where the scheme resolves it.
     - A rejected attempt that crossed the event before its last `EVENT_SKIP` is retried up
       to just before it (the error-controlled factor judged the whole attempt, including
       the crossing); one that crossed it later is left to the error-controlled factor.
@@ -24,10 +23,7 @@ def land_before_event(info: StepInfo, accept, ok, h_next, margin):
     No prediction (`inf`) leaves `h_next` unchanged; the result carries no gradient."""
     to_event = info.next_event - jnp.where(accept, info.h, 0.0)
     land = jax.lax.stop_gradient(to_event * (1 - margin))
-    # Judged against the shorter of the attempt and the proposal: a proposal grown
-    # tenfold over free flight would step over an event 1% of it away, and the next
-    # step's start would apply it that early, charged at every retry.
-    coming = jnp.isfinite(to_event) & (to_event > EVENT_SKIP * jnp.minimum(h_next, info.h))
+    coming = jnp.isfinite(to_event) & (to_event > EVENT_SKIP * h_next)
     # Retrying up to the event must shorten the attempt: an event in its last EVENT_SKIP
     # (an attempt that ends on the surface, up to the solver's tolerance on either side)
     # gave a retry 1 - margin times the attempt, rejected again for the same error: a
