@@ -1,6 +1,8 @@
 """Engine speed after compilation: plain-call overhead, repeated compat calls with rebuilt
-callbacks, and batch throughput of the bouncing ball, old path (`jax.jit(jax.vmap(...))`)
-against `Scene.sweep` / `nj.solve_batched` (ordered by restitution, chunked).
+callbacks, the marginal cost of an adaptive attempt on the ball against diffrax `Kvaerno5`
+on a penalty-regularised ball, and batch throughput of the bouncing ball, old path
+(`jax.jit(jax.vmap(...))`) against `Scene.sweep` / `nj.solve_batched` (ordered by
+restitution, chunked).
 
 Run:  python -m benchmarks.speed [--batch 10000] [--chunk 1000]
 
@@ -15,6 +17,7 @@ import time
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
+import diffrax  # noqa: E402
 import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
@@ -35,6 +38,27 @@ def best(fn, number=20, repeats=5):
     return min(times)
 
 
+def _program(call_solve):
+    """The solution of `call_solve()` and its compiled program as a function of nothing
+    (the arguments `nj.solve` passed it), without the Python-side work of a call."""
+    box = {}
+    original = _solve_jit._call
+
+    def spy(call):
+        box["call"] = call
+        return original(call)
+
+    _solve_jit._call = spy
+    try:
+        sol = call_solve()
+    finally:
+        _solve_jit._call = original
+    call = box["call"]
+    program = _solve_jit._program(call.key)
+    dynamic = [jnp.asarray(x) for x in call.dynamic]
+    return sol, lambda: program(dynamic)
+
+
 def overhead():
     """A plain `nj.solve` call against the compiled program it runs (same arguments)."""
 
@@ -44,16 +68,9 @@ def overhead():
     y0 = jnp.array([1.0, 2.0])
     solve = lambda: nj.solve(f, 0.0, 1.0, y0, max_steps=64)
     solve()
-    box = {}
-    original = _solve_jit._call
-    _solve_jit._call = lambda call: box.setdefault("call", call) and original(call)
-    solve()
-    _solve_jit._call = original
-    call = box["call"]
-    program = _solve_jit._program(call.key)
-    dynamic = [jnp.asarray(x) for x in call.dynamic]
+    _, program = _program(solve)
     t_solve = best(solve, number=50)
-    t_program = best(lambda: program(dynamic), number=50)
+    t_program = best(program, number=50)
     return t_solve, t_program
 
 
@@ -118,6 +135,63 @@ def batch(size, chunk, rtol=1e-3):
     )
 
 
+def _penalty_ball(restitution, k=1e4, g=9.81):
+    zeta = -np.log(restitution) / np.sqrt(np.pi**2 + np.log(restitution) ** 2)
+    c = 2 * zeta * np.sqrt(k)
+
+    def f(t, x, args):
+        force = jnp.where(x[0] < 0, -k * x[0] - c * x[1], 0.0)
+        return jnp.stack([x[1], -g + force])
+
+    @jax.jit
+    def run(t1, rtol):
+        sol = diffrax.diffeqsolve(
+            diffrax.ODETerm(f),
+            diffrax.Kvaerno5(),
+            0.0,
+            t1,
+            None,
+            jnp.array([1.0, 0.0]),
+            stepsize_controller=diffrax.PIDController(rtol=rtol, atol=1e-3 * rtol),
+            max_steps=16384,
+            throw=False,
+        )
+        return sol.ys, sol.stats["num_steps"]
+
+    return run
+
+
+def attempt_cost(restitution=0.95, horizons=(0.5, 8.0), rtol=1e-4):
+    """The marginal cost of an adaptive attempt: the difference of the compiled runs over
+    two horizons divided by the difference of their attempts, so that what a call costs
+    once (dispatch, buffers, the initial step, the result) cancels; nivpjax's compiled
+    program is timed without `nj.solve`'s Python-side work, diffrax's jitted function
+    with its dispatch. nivpjax's default
+    solver on the ball (output buffers of 1024 rows) against `Kvaerno5` on the
+    penalty-regularised ball (k = 1e4), each best of 50 calls per horizon."""
+    scene, x0, args = nj.scenes.bouncing_ball(restitution)
+    controller = nj.PIDController(rtol=rtol, atol=1e-3 * rtol)
+    kvaerno = _penalty_ball(restitution)
+    rows = {}
+    for name in ("nivpjax", "Kvaerno5"):
+        points = []
+        for t1 in horizons:
+            if name == "nivpjax":
+                sol, run = _program(
+                    lambda t1=t1: scene.solve(
+                        0.0, t1, x0, args, controller=controller, max_steps=1024
+                    )
+                )
+                attempts = int(sol.n_accepted + sol.n_rejected)
+            else:
+                run = lambda t1=t1: kvaerno(t1, rtol)
+                attempts = int(run()[1])
+            points.append((attempts, best(run, number=50, repeats=3)))
+        (a0, t0), (a1, t1_) = points
+        rows[name] = (a0, t0, a1, t1_, (t1_ - t0) / (a1 - a0))
+    return rows
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--batch", type=int, default=10_000)
@@ -134,6 +208,12 @@ def main(argv=None):
         f"compat solve_ivp_ns, callbacks rebuilt per call: first {first:.2f} s, "
         f"then {1e3 * again:.1f} ms per call ({first / again:.0f}x)"
     )
+    rows = attempt_cost()
+    print("\nmarginal cost of an adaptive attempt, ball (e = 0.95, rtol 1e-4, t1 = 0.5 and 8):")
+    print("| solver | attempts, t1 = 0.5 | call µs | attempts, t1 = 8 | call µs | µs per attempt |")
+    print("|---|---:|---:|---:|---:|---:|")
+    for name, (a0, t0, a1, t1, marginal) in rows.items():
+        print(f"| {name} | {a0} | {1e6 * t0:.1f} | {a1} | {1e6 * t1:.1f} | {1e6 * marginal:.2f} |")
     if opts.skip_batch:
         return
     r = batch(opts.batch, opts.chunk)
