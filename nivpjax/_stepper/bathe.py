@@ -5,13 +5,7 @@ import jax.numpy as jnp
 
 from .._nonlinear import AbstractNonlinearSolver
 from .._solution import StepStats
-from .base import (
-    AbstractStepper,
-    Stage,
-    StepOutput,
-    chained_stages,
-    default_solver,
-)
+from .base import AbstractStepper, Stage, StepOutput, chained_stages, default_solver
 
 
 def error_constant(gamma):
@@ -95,8 +89,9 @@ class Bathe(AbstractStepper):
         def follow(stage, sol, _):
             # The backward-difference stage after the trapezoidal one. c1 + c2 + c3 = 0:
             # it is a backward Euler step of size h/c3 from an affine combination of the
-            # two earlier points. (After the second stage: whether it contained an impact,
-            # the rest is dropped.)
+            # two earlier points. Outputs per stage: whether it contained an impact,
+            # whether the next one restarts, and its own length (after the second stage
+            # the next inputs are dropped).
             y_mid = sol.value
             impulsive = model.impulsive(stage.t_end, stage.h_eff, stage.y_prev, y_mid, args)
             # After a switch in the first stage, y0 moves (in derivatives only) by the
@@ -111,11 +106,12 @@ class Bathe(AbstractStepper):
             restart = impulsive | switched
             y_base = jnp.where(restart, y_mid, y_base)
             h_eff = jnp.where(restart, (1 - g) * h, h / c3)
-            return Stage.of(t1, h_eff, y_base, 1.0, y_mid), (impulsive, restart)
+            return Stage.of(t1, h_eff, y_base, 1.0, y_mid), (impulsive, restart, stage.h_eff)
 
         first = Stage.of(t_mid, g * h, y0, 0.5, y0)
         stages = chained_stages(model, self.solver, f0, first, follow, 2, args)
-        (y_mid, stats1, mult1, (_, restart)), (y1, stats2, multipliers, (late_impact, _)) = stages
+        (y_mid, stats1, mult1, (_, restart, _)), second = stages
+        y1, stats2, multipliers, (late_impact, _, h_eff) = second
         f_mid = model.f(t_mid, y_mid, args)
         f1 = model.f(t1, y1, args)
         r_a, r_b = model.reaction(mult1), model.reaction(multipliers)
@@ -132,7 +128,6 @@ class Bathe(AbstractStepper):
             # timing and the stage's holding the body after it, not the whole jump (that
             # rejects every step whose first stage ends within the contact's round-off
             # band, at any step size: the step then stalls there).
-            h_eff = jnp.where(restart, (1 - g) * h, h / c3)
             change = model.to_state(h_eff * r_b)
             late = model.stage_impact_error(t1 - h_eff, h_eff, y_mid, change, args)
             e = jnp.where(late_impact, e + late, e)
