@@ -19,12 +19,12 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import diffrax  # noqa: E402
 import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
-import numpy as np  # noqa: E402
 
 import nivpjax as nj  # noqa: E402
 from nivpjax._solve import _solve_jit  # noqa: E402
 
 from . import _common  # noqa: E402, F401  (float64)
+from .regularised import _ball as penalty_ball  # noqa: E402
 
 
 class _Captured(Exception):
@@ -79,13 +79,8 @@ def _smooth():
 
 
 def _kvaerno_ball():
-    k, e, g = 1e4, 0.8, 9.81
-    zeta = -np.log(e) / np.sqrt(np.pi**2 + np.log(e) ** 2)
-    c = 2 * zeta * np.sqrt(k)
-
-    def f(t, x, args):
-        force = jnp.where(x[0] < 0, -k * x[0] - c * x[1], 0.0)
-        return jnp.stack([x[1], -g + force])
+    params = {"e": 0.8, "g": 9.81}
+    f = lambda t, x, args: penalty_ball(t, x, params, 1e4, jnp)  # noqa: E731
 
     def run(x0, rtol):
         return diffrax.diffeqsolve(

@@ -26,6 +26,7 @@ import nivpjax as nj  # noqa: E402
 from nivpjax._solve import _solve_jit  # noqa: E402
 
 from . import _common  # noqa: E402, F401  (float64)
+from .regularised import _ball as penalty_ball  # noqa: E402
 
 
 def best(fn, number=20, repeats=5):
@@ -136,12 +137,8 @@ def batch(size, chunk, rtol=1e-3):
 
 
 def _penalty_ball(restitution, k=1e4, g=9.81):
-    zeta = -np.log(restitution) / np.sqrt(np.pi**2 + np.log(restitution) ** 2)
-    c = 2 * zeta * np.sqrt(k)
-
-    def f(t, x, args):
-        force = jnp.where(x[0] < 0, -k * x[0] - c * x[1], 0.0)
-        return jnp.stack([x[1], -g + force])
+    params = {"e": restitution, "g": g}
+    f = lambda t, x, args: penalty_ball(t, x, params, k, jnp)  # noqa: E731
 
     @jax.jit
     def run(t1, rtol):
