@@ -8,14 +8,18 @@ from .._nonlinear import AbstractNonlinearSolver
 from .base import AbstractStepper, StepOutput, default_solver, stats_of
 
 
-def state_rate(model, F, y0, y1, h, switched):
-    """Turn a rate in the units of $f$ into state units. Algebraic rows (multipliers) get
-    their secant rate over the step, so that a multiplier sliding along an equivalent
-    control is seen as moving, unless the selection changed face in the step (`switched`):
-    a jump of the multipliers is not smooth flow, and the secant would explain it away."""
+def state_rate(model, t, y, F, y0, y1, h, switched, args):
+    """The rate at `(t, y)` in state units, from `F` in the units of $f$. Algebraic rows
+    (multipliers) get their secant rate over the step, so that a multiplier sliding along
+    an equivalent control is seen as moving, unless the selection changed face in the
+    step (`switched`): a jump of the multipliers is not smooth flow, and the secant would
+    explain it away. Equation rows (index-1) get their own rate at `(t, y)` instead (see
+    `Model.equation_rate`): a secant has the same value at both ends of the step, so the
+    estimate would not see their rate change."""
     h_safe = jnp.where(h > 0, h, 1.0)
     secant = jnp.where(switched, 0.0, (y1 - y0) / h_safe)
-    return jnp.where(model.algebraic, secant, model.to_state(F))
+    rate = jnp.where(model.algebraic, secant, model.to_state(F))
+    return model.equation_rate(t, y, rate, args, rate)
 
 
 def flow_derivative(model, t, y, rate, args):
@@ -31,41 +35,43 @@ def theta_error(model, theta, t0, h, y0, y1, f0, f1, reaction, args):
     differences of the effective rates $F = f + r$):
 
     $$ e = (\theta - \tfrac12)\,h\,(f_1 - f_0)
-           - \tfrac{h^2}{12}\,[\theta = \tfrac12]\,(\dot F_1 - \dot F_0)
+           + \tfrac{h^2}{12}\,[\theta = \tfrac12]\,(\dot F_1 - \dot F_0)
            + (1 - \theta)\,h\,D, \quad D = f_1 - f_0 - \tfrac h2 (\dot F_0 + \dot F_1), $$
 
-    where $\dot F = \partial_t f + J y'$. The first term is the leading local error
-    $(\theta - \frac12) h^2 y''$, the second the trapezoidal rule's $-\frac{h^3}{12}
-    y'''$. $D$ is the change of rate over the step that the smooth flow does not explain:
-    $O(h^3)$ on a smooth piece, the jump of the rate when a selection changes face inside
-    the step. A scheme that averages the end rates ($\theta < 1$) then makes an error of
-    up to $(1 - \theta)\,h\,|D|$, which the last term charges. Backward Euler collocates
-    the selection at the step's end; its first term already sees the jump through the
-    multipliers in $f$.
+    where $\dot F = \partial_t f + J y'$, the multipliers' rates included (see
+    `state_rate`). Like every estimate here, $e$ is the computed state minus the exact
+    one: the first term is the leading local error $(\theta - \frac12) h^2 y''$, the
+    second the trapezoidal rule's $+\frac{h^3}{12} y'''$. $D$ is the change of rate over
+    the step that the smooth flow does not explain: $O(h^3)$ on a smooth piece, the jump
+    of the rate when a selection changes face inside the step. A scheme that averages the
+    end rates ($\theta < 1$) then makes an error of up to $(1 - \theta)\,h\,|D|$, which
+    the last term charges. Backward Euler collocates the selection at the step's end; its
+    first term already sees the jump through the multipliers in $f$.
     """
     if theta == 1.0:
         return backward_euler_error(model, t0, h, y0, y1, f0, f1, args)
     e = (theta - 0.5) * h * (f1 - f0)
     t1 = t0 + h
     switched = model.switched(t1, h, y0, y1, args)
-    r0 = state_rate(model, f0 + reaction, y0, y1, h, switched)
-    r1 = state_rate(model, f1 + reaction, y0, y1, h, switched)
+    r0 = state_rate(model, t0, y0, f0 + reaction, y0, y1, h, switched, args)
+    r1 = state_rate(model, t1, y1, f1 + reaction, y0, y1, h, switched, args)
     df0 = flow_derivative(model, t0, y0, r0, args)
     df1 = flow_derivative(model, t1, y1, r1, args)
     if theta == 0.5:
-        e = e - h**2 / 12 * (df1 - df0)
+        e = e + h**2 / 12 * (df1 - df0)
     defect = f1 - f0 - 0.5 * h * (df0 + df1)
     return e + (1 - theta) * h * defect
 
 
 def late_switch_error(model, t0, h, y0, y1, f0, args):
     r"""`(f0_end, e)`: $\tilde f_0 = f(t_0, \tilde y_0)$, the start rate with the
-    multipliers (selections) of the step's end, and the error of a backward Euler stage that
+    selections of the step's end (`Model.selection_rows`; equation rows keep their start
+    values, which their equations fix), and the error of a backward Euler stage that
     applied them from the start although the selection changes face only at a time $\tau$
     inside the step (the first zero of a switching function, from `Model.next_event`):
     $e = \tau\,(f_0 - \tilde f_0)$, in the units of $f$. It is what rejects a step that
     crosses a switching surface, or lands on one, too early."""
-    f0_end = model.f(t0, jnp.where(model.algebraic, y1, y0), args)
+    f0_end = model.f(t0, jnp.where(model.selection_rows, y1, y0), args)
     tau = model.next_event(t0 + h, h, y0, y1, args)
     # A step that lands on the surface has its event at the end, tau = h up to the
     # rounding of the secant (measured one ulp above h for a step jumping onto a sliding
@@ -80,11 +86,14 @@ def backward_euler_error(model, t0, h, y0, y1, f0, f1, args):
     r"""Backward Euler's estimate $\tfrac h2 (f_1 - \tilde f_0) + \tau\,(f_0 - \tilde f_0)$.
 
     The scheme never evaluates $f$ at the start, so the start rate is free to choose:
-    $\tilde f_0 = f(t_0, \tilde y_0)$ takes the multipliers (selections) of the step's end,
+    $\tilde f_0 = f(t_0, \tilde y_0)$ takes the selections of the step's end,
     which is the right-limit rate when the step starts on a switching surface or inside a
     sliding mode (where the previous step's multiplier is an average over that step, not
-    the selection at $t_0$). A selection that changes face inside the step was applied too
-    early: the second term, see `late_switch_error`."""
+    the selection at $t_0$). Equation rows (a diode's current through its series resistor)
+    keep their start values: they are functions of the state, so that the estimate sees
+    them move over the step (taking the end's put the whole change of a conducting diode's
+    current out of sight: an estimate 1000x too small). A selection that changes face
+    inside the step was applied too early: the second term, see `late_switch_error`."""
     if not model.has_algebraic:
         return 0.5 * h * (f1 - f0)
     f0_end, late = late_switch_error(model, t0, h, y0, y1, f0, args)
@@ -163,7 +172,7 @@ class BackwardEuler(_AbstractTheta):
 class Trapezoidal(_AbstractTheta):
     """The trapezoidal rule: the theta method with $\\theta = 1/2$. Order 2, A-stable, no
     damping (multipliers may ring after a switch: prefer Bathe for that). Embedded
-    estimate $-\\tfrac{h^2}{12}(\\dot F_1 - \\dot F_0)$ plus a charge for rate jumps
+    estimate $\\tfrac{h^2}{12}(\\dot F_1 - \\dot F_0)$ plus a charge for rate jumps
     (error order 3)."""
 
     solver: AbstractNonlinearSolver = eqx.field(default_factory=default_solver)
