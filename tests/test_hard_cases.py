@@ -591,7 +591,15 @@ def test_stick_slip_under_slowly_growing_load(name):
     else:
         balanced = spring
     np.testing.assert_allclose(mult[inner, 1], -balanced[inner], rtol=0, atol=1e-9)
-    assert np.all(np.abs(spring[inner]) <= mu[inner] * p["N"] + 1e-9)
+    # Within the static bound up to what the error test accepts: a step of size h that
+    # ends stuck with the load above the bound counts h times the excess as error (the
+    # velocity the block would gain), accepted up to atol + rtol |y0| (measured: no excess
+    # for most schemes; 1.8e-5 for the trapezoidal rule's step of 0.016 across the
+    # breakaway at t = 60, against a slack of 6.2e-5).
+    h = np.diff(ts, prepend=ts[0])
+    scale = 1e-6 + 1e-4 * np.max(np.abs(np.roll(ys[:, :2], 1, axis=0)), axis=1)
+    slack = scale / np.where(h > 0, h, 1.0)
+    assert np.all(np.abs(spring[inner]) <= mu[inner] * p["N"] + slack[inner] + 1e-9)
     # Slip-stick-slip as the event-driven reference: each reference switch within 0.15 of the
     # step where the numerical solution switches (measured 0.05 at most). The trapezoidal
     # rule at this loose rtol (1e-4) with its embedded estimate puts the second stick 0.18

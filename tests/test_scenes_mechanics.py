@@ -284,6 +284,30 @@ def block(request):
     return cone, scene, _run(BLOCK_SOLVES[cone], x0, args, 1.5)
 
 
+def test_block_comes_to_rest_at_the_tolerance_with_the_trapezoidal_rule():
+    """A step across the stop averages the sliding and the resting rates: the theta
+    estimate must charge that (the friction is a proximal map, no multiplier, so the
+    stage's reaction is one average over the step). Measured before the charge: the
+    trapezoidal rule stepped over the stop in 8 steps and ended 1.8e-2 off at every
+    `rtol`, `successful`; after, 2.0e-5 at rtol 1e-4 and 8.4e-7 at 1e-6."""
+    scene, x0, args = BLOCKS[False]
+    stepper = nj.Trapezoidal()
+
+    @eqx.filter_jit
+    def final(rtol):
+        controller = nj.PIDController(rtol=rtol, atol=1e-3 * rtol)
+        sol = scene.solve(0.0, 1.0, x0, args, stepper=stepper, controller=controller, throw=False)
+        return sol.ys[-1], sol.result  # the rows after the last step repeat the final state
+
+    speed0 = np.hypot(*V0_BLOCK)
+    rest = np.asarray(V0_BLOCK) / speed0 * speed0**2 / (2 * MU_BLOCK * G)
+    for rtol in (1e-4, 1e-6):
+        y, result = final(jnp.asarray(rtol))
+        assert result == nj.RESULTS.successful
+        y = np.asarray(y)
+        assert np.max(np.abs(y[:2] - rest)) < 10 * rtol, (rtol, y[:2] - rest)
+
+
 def test_block_on_plane(block):
     cone, scene, (sol, ts, ys, mult) = block
     x, multipliers = scene.split(ys)

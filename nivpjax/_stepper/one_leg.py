@@ -5,6 +5,7 @@ import jax
 import jax.numpy as jnp
 
 from .._nonlinear import AbstractNonlinearSolver
+from .._projector import Identity
 from .base import AbstractStepper, StepOutput, default_solver, stats_of
 
 
@@ -60,7 +61,31 @@ def theta_error(model, theta, t0, h, y0, y1, f0, f1, reaction, args):
     if theta == 0.5:
         e = e + h**2 / 12 * (df1 - df0)
     defect = f1 - f0 - 0.5 * h * (df0 + df1)
-    return e + (1 - theta) * h * defect
+    e = e + (1 - theta) * h * defect
+    kink = switch_kink_error(model, theta, t0, h, y0, y1, f0, f1, switched, args)
+    return jnp.where(jnp.abs(kink) > jnp.abs(e), kink, e)
+
+
+def switch_kink_error(model, theta, t0, h, y0, y1, f0, f1, switched, args):
+    r"""The error of a theta step whose stage changed face (`switched`: friction sticking,
+    a relay reaching its sliding set, a diode switching) at a time $\tau$ inside it: the
+    rate has a kink or a jump there, and the scheme weighs the end rates as if it had
+    none, $e = (1 - \theta)(h - \tau)(f_0 - f_1)$ (exact for a rate linear up to $\tau$
+    and constant after). $\tau$ from `Model.next_event` where the projector predicts the
+    event inside the step (a step landing on it is charged nothing), 0 otherwise.
+
+    The defect term of `theta_error` charges the same where $f$ carries the switch
+    (multipliers); this one is for laws applied as proximal maps, without multipliers,
+    whose reaction the estimate takes as constant over the step, so that $D = 0$:
+    measured, a block sliding to rest on a plane (isotropic friction) ended 1.8e-2 off at
+    every `rtol` with the trapezoidal rule, in eight steps, `successful`."""
+    if isinstance(model.projector, Identity) or model.has_impulses:
+        # Contacts have charges of their own (impacts at the step's start, landings);
+        # a contact opening after an impact is no kink of the flow.
+        return jnp.zeros_like(f0)
+    tau = model.next_event(t0 + h, h, y0, y1, args)
+    tau = jnp.where(tau <= h * (1 + jnp.sqrt(jnp.finfo(y1.dtype).eps)), jnp.minimum(tau, h), 0.0)
+    return jnp.where(switched, (1 - theta) * (h - tau) * (f0 - f1), 0.0)
 
 
 def late_switch_error(model, t0, h, y0, y1, f0, args):
