@@ -447,8 +447,13 @@ class Model(eqx.Module):
 
     def violation(self, t1, h, y0, y1, args):
         """Constraint violation at the end of a step (see `AbstractProjector.violation`).
-        The context carries the vector field at the end point (`rate`)."""
-        ctx = self._context(t1, h, y0, y1, args, rate=self.f(t1, y1, args))
+        The context carries the vector field at the end point (`rate`) and the rates of
+        the differential rows at both ends (`start_rate`, `end_rate`, state units)."""
+        rate = self.f(t1, y1, args)
+        start_rate = jax.lax.stop_gradient(self._rate(t1 - h, y0, args))
+        ctx = self._context(
+            t1, h, y0, y1, args, rate=rate, start_rate=start_rate, end_rate=self.to_state(rate)
+        )
         return self.projector.violation(ctx)
 
     def next_event(self, t1, h, y0, y1, args):

@@ -10,7 +10,7 @@ import numpy as np
 
 from .. import _linalg
 from .base import AbstractProjector, ProjectionContext, switch_delay
-from .predict import first_root, secant_crossing
+from .predict import first_root, hermite_excursion, secant_crossing
 
 
 # A step that starts this fraction of its size or less before a switch treats the switch as
@@ -308,9 +308,23 @@ class EventLocated(AbstractProjector):
         return w, skipped[jnp.argmax(skipped)]
 
     def violation(self, ctx: ProjectionContext):
-        s0 = jnp.atleast_1d(self.surface(ctx.t - ctx.h, ctx.y_prev, ctx.args))
-        s1 = jnp.atleast_1d(self.surface(ctx.t, ctx.y_iter, ctx.args))
+        r"""A switch inside the step, in the units of $s$: where $s$ changed sign between
+        the ends, the smaller of $|s_0|, |s_1|$; where both ends lie on the same side but
+        the cubic Hermite interpolant through the end values and rates
+        (`ctx.start_rate`, `ctx.end_rate`) crosses the surface and back, how far it
+        reaches across (`hermite_excursion`). The second is a pair of switches that the
+        end values alone do not show: a diode bridge at `rtol = 1e-4` stepped over a
+        whole conduction pulse in one step of 7.8 ms and ended 9% off, `successful`."""
+        s0 = self._value(ctx, ctx.t - ctx.h, ctx.y_prev)
+        s1 = self._value(ctx, ctx.t, ctx.y_iter)
         crossed = s0 * s1 < 0
-        size = jnp.minimum(jnp.abs(s0), jnp.abs(s1))
-        own = jnp.max(jnp.where(crossed, size, 0.0), initial=0.0).astype(ctx.y_iter.dtype)
+        size = jnp.where(crossed, jnp.minimum(jnp.abs(s0), jnp.abs(s1)), 0.0)
+        if ctx.start_rate is not None and ctx.end_rate is not None:
+            ds0 = self._along(ctx, ctx.t - ctx.h, ctx.y_prev, ctx.start_rate)[1]
+            ds1 = self._along(ctx, ctx.t, ctx.y_iter, ctx.end_rate)[1]
+            tiny = 64 * jnp.finfo(s1.dtype).eps * (1.0 + jnp.maximum(jnp.abs(s0), jnp.abs(s1)))
+            away = (jnp.abs(s0) > tiny) & (jnp.abs(s1) > tiny)
+            excursion = hermite_excursion(s0, s1, ctx.h * ds0, ctx.h * ds1)
+            size = jnp.maximum(size, jnp.where(away, excursion, 0.0))
+        own = jnp.max(size, initial=0.0).astype(ctx.y_iter.dtype)
         return jnp.maximum(own, self.projector.violation(ctx))

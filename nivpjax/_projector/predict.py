@@ -31,3 +31,28 @@ def secant_crossing(s0, s1, h):
     approaching = (s0 * ds < 0) & (jnp.abs(s0) > tiny) & (jnp.abs(ds) > tiny)
     tau = h * s0 / jnp.where(approaching, -ds, 1.0)
     return jnp.where(approaching & (tau > 0), tau, jnp.inf)
+
+
+def hermite_excursion(s0, s1, m0, m1):
+    r"""How far the cubic Hermite interpolant of a switching function reaches across zero
+    inside a step whose two ends lie on the same side: $p(0) = s_0$, $p(1) = s_1$,
+    $p'(0) = m_0$, $p'(1) = m_1$ (the rates times the step size), componentwise. The
+    largest $|p(\theta)|$ at an extremum $\theta \in (0, 1)$ where $p$ has the sign opposite
+    to $s_0$; 0 where there is none (no pair of crossings inside the step that the end
+    values and rates show)."""
+    c2 = -3 * s0 - 2 * m0 + 3 * s1 - m1
+    c3 = 2 * s0 + m0 - 2 * s1 + m1
+    # p'(theta) = m0 + 2 c2 theta + 3 c3 theta^2: its roots, cancellation-free
+    # (theta = -m0 / (c2 +- sqrt(c2^2 - 3 c3 m0)), the linear root where c3 vanishes).
+    disc = c2**2 - 3 * c3 * m0
+    root = jnp.sqrt(jnp.where(disc >= 0, disc, 0.0))
+
+    def reach(den):
+        safe = jnp.where(den != 0, den, 1.0)
+        theta = -m0 / safe
+        p = s0 + theta * (m0 + theta * (c2 + theta * c3))
+        inside = (disc >= 0) & (den != 0) & (theta > 0) & (theta < 1)
+        across = inside & (p * s0 < 0) & (s0 * s1 > 0)
+        return jnp.where(across, jnp.abs(p), 0.0)
+
+    return jnp.maximum(reach(c2 + root), reach(c2 - root))
