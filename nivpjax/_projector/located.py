@@ -121,6 +121,13 @@ class EventLocated(AbstractProjector):
         value = lambda t, y: self._value(ctx, t, y)
         return jax.jvp(value, (t, y), (jnp.ones_like(t), jnp.asarray(y_dot, y.dtype)))
 
+    def _end_rates(self, ctx: ProjectionContext):
+        # (s0', s1'): the switching functions' rates at the step's two ends, along the
+        # start's and the end's rates.
+        ds0 = self._along(ctx, ctx.t - ctx.h, ctx.y_prev, ctx.start_rate)[1]
+        ds1 = self._along(ctx, ctx.t, ctx.y_iter, ctx.end_rate)[1]
+        return ds0, ds1
+
     def initial_violation(self, ctx: ProjectionContext):
         return self.projector.initial_violation(ctx)
 
@@ -163,12 +170,9 @@ class EventLocated(AbstractProjector):
         return jnp.minimum(own, self.projector.next_event(ctx))
 
     def _predict(self, ctx: ProjectionContext, s0, s1, secant):
-        dtype = s1.dtype
-        ds0 = self._along(ctx, ctx.t - ctx.h, ctx.y_prev, ctx.start_rate)[1]
-        ds1 = self._along(ctx, ctx.t, ctx.y_iter, ctx.end_rate)[1]
+        ds0, ds1 = self._end_rates(ctx)
         h = jnp.where(ctx.h > 0, ctx.h, 1.0)
-        tiny = 64 * jnp.finfo(dtype).eps * (1.0 + jnp.maximum(jnp.abs(s0), jnp.abs(s1)))
-        away0, away1 = jnp.abs(s0) > tiny, jnp.abs(s1) > tiny
+        away0, away1 = _off_surface(s0, s1)
         landed = away0 & ~away1
         reach = jnp.minimum(first_root(s0, ds0, jnp.zeros_like(s0)), h)
         off = (s0 * s1 > 0) & away0 & away1
@@ -320,11 +324,16 @@ class EventLocated(AbstractProjector):
         crossed = s0 * s1 < 0
         size = jnp.where(crossed, jnp.minimum(jnp.abs(s0), jnp.abs(s1)), 0.0)
         if ctx.start_rate is not None and ctx.end_rate is not None:
-            ds0 = self._along(ctx, ctx.t - ctx.h, ctx.y_prev, ctx.start_rate)[1]
-            ds1 = self._along(ctx, ctx.t, ctx.y_iter, ctx.end_rate)[1]
-            tiny = 64 * jnp.finfo(s1.dtype).eps * (1.0 + jnp.maximum(jnp.abs(s0), jnp.abs(s1)))
-            away = (jnp.abs(s0) > tiny) & (jnp.abs(s1) > tiny)
+            ds0, ds1 = self._end_rates(ctx)
+            away0, away1 = _off_surface(s0, s1)
+            away = away0 & away1
             excursion = hermite_excursion(s0, s1, ctx.h * ds0, ctx.h * ds1)
             size = jnp.maximum(size, jnp.where(away, excursion, 0.0))
         own = jnp.max(size, initial=0.0).astype(ctx.y_iter.dtype)
         return jnp.maximum(own, self.projector.violation(ctx))
+
+
+def _off_surface(s0, s1):
+    # Whether each end lies off the surface by more than round-off.
+    tiny = 64 * jnp.finfo(s1.dtype).eps * (1.0 + jnp.maximum(jnp.abs(s0), jnp.abs(s1)))
+    return jnp.abs(s0) > tiny, jnp.abs(s1) > tiny

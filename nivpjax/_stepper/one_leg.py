@@ -83,8 +83,7 @@ def switch_kink_error(model, theta, t0, h, y0, y1, f0, f1, switched, args):
         # Contacts have charges of their own (impacts at the step's start, landings);
         # a contact opening after an impact is no kink of the flow.
         return jnp.zeros_like(f0)
-    tau = model.next_event(t0 + h, h, y0, y1, args)
-    tau = jnp.where(tau <= h * (1 + jnp.sqrt(jnp.finfo(y1.dtype).eps)), jnp.minimum(tau, h), 0.0)
+    tau = event_in_step(model, t0, h, y0, y1, args)
     return jnp.where(switched, (1 - theta) * (h - tau) * (f0 - f1), 0.0)
 
 
@@ -97,14 +96,20 @@ def late_switch_error(model, t0, h, y0, y1, f0, args):
     $e = \tau\,(f_0 - \tilde f_0)$, in the units of $f$. It is what rejects a step that
     crosses a switching surface, or lands on one, too early."""
     f0_end = model.f(t0, jnp.where(model.selection_rows, y1, y0), args)
+    # Where the selection did not change, f0 = f0_end and the term vanishes anyway.
+    tau = event_in_step(model, t0, h, y0, y1, args)
+    return f0_end, tau * (f0 - f0_end)
+
+
+def event_in_step(model, t0, h, y0, y1, args):
+    """The predicted time from `t0` of the first event inside the step (`Model.next_event`),
+    0 where none is predicted inside it."""
     tau = model.next_event(t0 + h, h, y0, y1, args)
     # A step that lands on the surface has its event at the end, tau = h up to the
     # rounding of the secant (measured one ulp above h for a step jumping onto a sliding
     # set, which a strict `tau <= h` left uncharged: a successful run with its sliding
-    # time off by 8e-4 at rtol 1e-5). Where the selection did not change, f0 = f0_end and
-    # the term vanishes anyway.
-    tau = jnp.where(tau <= h * (1 + jnp.sqrt(jnp.finfo(y1.dtype).eps)), jnp.minimum(tau, h), 0.0)
-    return f0_end, tau * (f0 - f0_end)
+    # time off by 8e-4 at rtol 1e-5).
+    return jnp.where(tau <= h * (1 + jnp.sqrt(jnp.finfo(y1.dtype).eps)), jnp.minimum(tau, h), 0.0)
 
 
 def backward_euler_error(model, t0, h, y0, y1, f0, f1, args):
