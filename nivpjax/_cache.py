@@ -31,6 +31,8 @@ import equinox as eqx
 import jax
 import numpy as np
 
+from ._compiler import compiler_options
+
 
 _HOIST_ERRORS = (
     jax.errors.ConcretizationTypeError,
@@ -253,13 +255,18 @@ class CachedJit:
     def __call__(self, *args):
         return self.prepare(*args)()
 
-    def _program(self, key):
+    def _program(self, key, nested: bool = False):
+        """The jitted program of the structure `key`. A top-level call compiles with
+        nivpjax's `compiler_options()`; a call under an outer `jit` or other
+        transformation (`nested`) goes through a plain `jax.jit` of the same function,
+        since JAX takes compiler options on top-level jits only (the outer program's own
+        options then apply)."""
         with self._lock:
-            program = self._programs.get(key)
-            if program is not None:
+            programs = self._programs.get(key)
+            if programs is not None:
                 self._programs.move_to_end(key)
                 self._counts["hits"] += 1
-                return program
+                return programs[nested]
             self._counts["misses"] += 1
             spec = key[1]
 
@@ -268,16 +275,17 @@ class CachedJit:
                 return self.fn(*_rebuild_tree(spec, iter(dynamic)))
 
             program_fn.__name__ = getattr(self.fn, "__name__", "program")
-            program = jax.jit(program_fn)
-            self._programs[key] = program
+            options = compiler_options() or None
+            programs = (jax.jit(program_fn, compiler_options=options), jax.jit(program_fn))
+            self._programs[key] = programs
             while len(self._programs) > self.maxsize:
                 old, _ = self._programs.popitem(last=False)
                 self._seen = {s for s in self._seen if s[0] != old}
-            return program
+            return programs[nested]
 
     def _call(self, call: PreparedCall):
         try:
-            out = self._program(call.key)(call.dynamic)
+            out = self._run(call)
         except _HOIST_ERRORS:
             if call.key[0] != "hoisted":
                 raise
@@ -289,6 +297,17 @@ class CachedJit:
         if call.signature is not None:
             self._seen.add(call.signature)
         return out
+
+    def _run(self, call: PreparedCall):
+        nested = call.signature is None
+        try:
+            return self._program(call.key, nested)(call.dynamic)
+        except ValueError as error:
+            # Under an outer `jit` whose arguments reach this call as constants only (no
+            # tracer among them): JAX refuses the top-level program's compiler options.
+            if nested or "top-level" not in str(error):
+                raise
+            return self._program(call.key, nested=True)(call.dynamic)
 
     def prepare_static(self, call: PreparedCall) -> PreparedCall:
         args = _rebuild_tree(call.key[1], iter(call.dynamic))

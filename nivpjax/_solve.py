@@ -4,6 +4,7 @@ import contextvars
 from typing import Any, Literal
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -160,7 +161,7 @@ def solve(
         v.check_vector_field(vector_field, t0, y0, args)
     sol = call()
     if throw and not traced:
-        _raise_if_failed(sol)
+        sol = _raise_if_failed(sol)
     return sol
 
 
@@ -218,8 +219,12 @@ def _solve_impl(
 _solve_jit = CachedJit(_solve_impl)
 
 
-def _raise_if_failed(sol: Solution):
+def _raise_if_failed(sol: Solution) -> Solution:
     result = sol.result
+    if isinstance(result._value, jax.core.Tracer):
+        # Under an outer transformation that none of the arguments showed (a closure over
+        # a traced value, or constants only inside an outer `jit`): check in its graph.
+        return result.error_if(sol, result != RESULTS.successful)
     if np.ndim(result._value) != 0:
         failed = np.flatnonzero(np.asarray(result._value) != RESULTS.successful._value)
         if failed.size:
@@ -228,9 +233,9 @@ def _raise_if_failed(sol: Solution):
                 f"{'...' if failed.size > 10 else ''}); pass throw=False and inspect "
                 "`Solution.result` per member."
             )
-        return
+        return sol
     if int(np.asarray(result._value)) == int(RESULTS.successful._value):
-        return
+        return sol
     k = int(sol.n_accepted)
     t = float(sol.t_final)
     h = float(sol.h_last)

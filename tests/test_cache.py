@@ -193,3 +193,35 @@ def test_compat_rebuilt_callbacks_compile_once():
     h = 0.05
     A = np.array([[1.0, -h], [4.0 * h, 1.0]])
     np.testing.assert_allclose(y[1], np.linalg.solve(A, [1.0, 0.0]), rtol=1e-8)
+
+
+def test_compiler_options_are_known_to_xla_and_dropped_when_not(monkeypatch):
+    from nivpjax import _compiler
+
+    assert nj.compiler_options("gpu") == {}
+    # The option nivpjax relies on is one this XLA accepts (a renamed or removed option
+    # would silently bring back the slow compile: this test is what notices).
+    assert nj.compiler_options("cpu") == {"xla_cpu_use_fusion_emitters": False}
+    monkeypatch.setattr(_compiler, "_CPU", {**_compiler._CPU, "xla_cpu_no_such_option": True})
+    assert nj.compiler_options("cpu") == {"xla_cpu_use_fusion_emitters": False}
+
+
+def test_solves_under_an_outer_jit_give_the_top_level_answer():
+    # Top level: nivpjax's compiler options. Under an outer jit (traced or constant
+    # arguments) JAX refuses nested compiler options: the same program without them.
+    f = decay(1.5)
+    top = _solve(f)
+    traced = jax.jit(
+        lambda y0: nj.solve(f, 0.0, 1.0, y0, stepper=nj.BackwardEuler(), max_steps=256)
+    )(Y0)
+    constant = jax.jit(lambda: _solve(f))()
+    for sol in (traced, constant):
+        assert int(sol.n_accepted) == int(top.n_accepted)
+        assert int(sol.n_rejected) == int(top.n_rejected)
+        np.testing.assert_allclose(sol.ys, top.ys, rtol=1e-13, atol=1e-15)
+    np.testing.assert_allclose(top.y_final, np.exp(-1.5) * np.asarray(Y0), rtol=0.1)
+
+
+def test_a_failure_under_an_outer_jit_seen_only_in_a_closure_raises():
+    with pytest.raises(RuntimeError, match="maximum number of time steps"):
+        jax.block_until_ready(jax.jit(lambda k: _solve(decay(k), max_steps=2).y_final)(1.5))

@@ -11,6 +11,7 @@ import jax.numpy as jnp
 import jax.random as jr
 import optax
 
+from .._compiler import filter_jit
 from ._env import EnvParams, StepSizeEnv
 from ._estimators import collect_episodes, es_gradient, reinforce_gradient
 from ._policy import save_policy
@@ -37,7 +38,7 @@ class TrainResult:
     seconds: float
 
 
-@eqx.filter_jit
+@filter_jit
 def _draw(task, keys):
     x0, args = jax.vmap(task.sample)(keys)
     y_ref, ok = jax.vmap(task.reference)(x0, args)
@@ -49,7 +50,7 @@ def draw(task: Task, key, n: int):
     return _draw(task, jr.split(key, n))
 
 
-@eqx.filter_jit
+@filter_jit
 def _evaluate(task, objective, controller, x0, args, y_ref):
     def one(x0, args, y_ref):
         return metrics(task, objective, task.solve(controller, x0, args), y_ref)
@@ -173,7 +174,7 @@ def _es_step(task, objective, optimiser, static, pairs, sigma):
 
         return jnp.mean(jax.vmap(one)(x0, args, y_ref))
 
-    @eqx.filter_jit
+    @filter_jit
     def step(params, opt_state, key, x0, args, y_ref):
         loss = lambda p: batch_cost(p, x0, args, y_ref)
         grads, _ = es_gradient(loss, params, key, pairs=pairs, sigma=sigma)
@@ -185,7 +186,7 @@ def _es_step(task, objective, optimiser, static, pairs, sigma):
 
 
 def _reinforce_step(env, optimiser, static, noise, horizon):
-    @eqx.filter_jit
+    @filter_jit
     def step(params, opt_state, key, reset_keys):
         policy = eqx.combine(params, static)
         noise_keys = jr.split(key, reset_keys.shape[0])

@@ -3,7 +3,6 @@
 
 from typing import Any
 
-import equinox as eqx
 import gymnasium
 import jax
 import jax.numpy as jnp
@@ -14,6 +13,7 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
+from .._compiler import filter_jit
 from ..learn import EnvParams, Objective, StepSizeEnv, Task
 from ..learn.tasks import TASKS
 
@@ -40,22 +40,22 @@ def _spaces(env: StepSizeEnv):
     return obs, act
 
 
-@eqx.filter_jit
+@filter_jit
 def _reset(env, key, params):
     return env.reset(key, params)
 
 
-@eqx.filter_jit
+@filter_jit
 def _step(env, state, action, params):
     return env.step(jr.PRNGKey(0), state, action, params)
 
 
-@eqx.filter_jit
+@filter_jit
 def _vreset(env, keys, params):
     return jax.vmap(env.reset, in_axes=(0, None))(keys, params)
 
 
-@eqx.filter_jit
+@filter_jit
 def _vstep(env, state, actions, params):
     return jax.vmap(env.step, in_axes=(None, 0, 0, None))(jr.PRNGKey(0), state, actions, params)
 
