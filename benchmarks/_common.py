@@ -146,16 +146,18 @@ def markdown_table(headers, rows):
     return "\n".join(lines)
 
 
-def compile_timed(fn, *args):
+def compile_timed(fn, *args, options=None):
     """`jax.jit(fn)` lowered and compiled for `args`: (the jitted function, seconds). The
     time covers tracing (the library's Python-side assembly included) and XLA compilation.
+    `options`: XLA compiler options (nivpjax's runs pass `nj.compiler_options()`, which its
+    own top-level programs use; the peers compile with XLA's defaults, as their users do).
 
     Calls then go through the jitted function, which reuses that executable (no second
     compilation) on JAX's C++ dispatch path, as a user's calls do. Calling the AOT
     `Compiled` object instead falls back to Python dispatch for programs with error
     checks (`equinox.error_if`, in nivpjax and diffrax alike): about 0.1 ms more per call,
     measured on a relay solve (0.24 ms against 0.13 ms)."""
-    jitted = jax.jit(fn)
+    jitted = jax.jit(fn, compiler_options=options)
     t0 = time.perf_counter()
     jitted.lower(*args).compile()
     return jitted, time.perf_counter() - t0
@@ -172,14 +174,15 @@ class BufferTiers:
     user sizes `max_steps` for a job, keeps that cost out of the comparison; nivpjax and
     diffrax get the same treatment."""
 
-    def __init__(self, build, tiers, overflowed, *args0):
+    def __init__(self, build, tiers, overflowed, *args0, options=None):
         self.build, self.tiers, self.overflowed, self.args0 = build, tiers, overflowed, args0
+        self.options = options
         self.fns = {}
         self.compile_s = None
 
     def _fn(self, max_steps):
         if max_steps not in self.fns:
-            fn, seconds = compile_timed(self.build(max_steps), *self.args0)
+            fn, seconds = compile_timed(self.build(max_steps), *self.args0, options=self.options)
             self.fns[max_steps] = fn
             self.compile_s = seconds if self.compile_s is None else self.compile_s
         return self.fns[max_steps]

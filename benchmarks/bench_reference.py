@@ -122,12 +122,14 @@ NJ_PROBLEMS = {
 
 
 # --- problems: reference side --------------------------------------------------------------------
-def _ref_ball(solver):
+def _ref_ball(solver, xp=np):
+    """The reference's notebook settings for the ball; `xp=jnp` gives the same script for
+    the compat entry point (its callbacks are traced by JAX)."""
     popts = dict(
-        gap=lambda t, y: np.array([y[1]]),
-        u_map=lambda t, y: np.array([y[0]]),
-        J_u=lambda t, y: np.array([[1.0, 0.0]]),
-        G_apply=lambda t, y, lam: np.array([lam[0], 0.0]),
+        gap=lambda t, y: xp.array([y[1]]),
+        u_map=lambda t, y: xp.array([y[0]]),
+        J_u=lambda t, y: xp.array([[1.0, 0.0]]),
+        G_apply=lambda t, y, lam: xp.array([lam[0], 0.0]),
         e=E_BALL,
         gap_tol=0.0,
         lcp_maxit=200,
@@ -137,14 +139,14 @@ def _ref_ball(solver):
     sopts = dict(tol=1e-7, max_iter=200)
     if solver == "semismooth_newton":
         sopts.update(
-            rhs_jac=lambda t, y: np.array([[0.0, 0.0], [1.0, 0.0]]),
+            rhs_jac=lambda t, y: xp.array([[0.0, 0.0], [1.0, 0.0]]),
             lam=0.2,
             globalization="linesearch",
             max_backtracks=25,
             ls_min_alpha=1e-10,
         )
     return dict(
-        fun=lambda t, y: np.array([-G, y[0]]),
+        fun=lambda t, y: xp.array([-G, y[0]]),
         t_span=(0.0, T_BALL),
         y0=np.array(Y0_BALL),
         method="trapezoidal",
@@ -160,16 +162,16 @@ def _ref_ball(solver):
     )
 
 
-def _ref_slider(solver):
+def _ref_slider(solver, xp=np):
+    """The reference's notebook settings for the slider (`xp` as for `_ref_ball`)."""
     cs = [slice(0, 1), slice(1, 2)]
 
     def con_force(y, t=None, Fk_val=None):
-        c = np.zeros_like(y)
-        c[0] = FRIC  # zero on unconstrained entries (the reference acts wherever c != 0)
-        return c
+        # zero on unconstrained entries (the reference acts wherever c != 0)
+        return xp.array([FRIC, 0.0])
 
     return dict(
-        fun=lambda t, y: np.array([-K_SPRING * y[1] - C_DAMP * y[0], y[0]]),
+        fun=lambda t, y: xp.array([-K_SPRING * y[1] - C_DAMP * y[0], y[0]]),
         t_span=(0.0, T_SLIDER),
         y0=np.array(Y0_SLIDER),
         method="composite",
@@ -180,12 +182,12 @@ def _ref_slider(solver):
             rhok=np.ones(2),
             component_slices=cs,
             constraint_indices=[0],
-            jac_func=lambda y, t=None, Fk_val=None: np.zeros((2, 2)),
+            jac_func=lambda y, t=None, Fk_val=None: xp.zeros((2, 2)),
         ),
         solver_opts=dict(
             tol=1e-10,
             max_iter=100,
-            rhs_jac=lambda t, y: np.array([[-C_DAMP, -K_SPRING], [1.0, 0.0]]),
+            rhs_jac=lambda t, y: xp.array([[-C_DAMP, -K_SPRING], [1.0, 0.0]]),
         ),
         h0=0.01,
         component_slices=cs,

@@ -52,12 +52,13 @@ def main(argv=None):
     a = parser.parse_args(argv)
     t1 = 3.0
     run, e = _make(a.steps, t1)
-    single = jax.jit(run)
+    options = nj.compiler_options() or None  # as nivpjax's own top-level programs
+    single = jax.jit(run, compiler_options=options)
     seconds, sol = _best(single, jnp.asarray(e), a.repeats)
     n = int(sol.n_accepted) + int(sol.n_rejected)
     assert sol.result == nj.RESULTS.successful, nj.RESULTS[sol.result]
     print(f"alone: {n} steps, {seconds * 1e3:.2f} ms, {seconds / n * 1e6:.2f} µs per step")
-    batched = jax.jit(jax.vmap(run))
+    batched = jax.jit(jax.vmap(run), compiler_options=options)
     es = jnp.linspace(0.7, 0.9, a.batch)
     seconds, sol = _best(batched, es, max(2, a.repeats // 2))
     total = int(jnp.sum(sol.n_accepted + sol.n_rejected))

@@ -107,8 +107,9 @@ def run_problem(name, quick, log):
 
     p = jnp.asarray(prob["at"])
     repeats = 3 if quick else 7
-    fwd, fwd_compile = compile_timed(loss, p)
-    vg, vg_compile = compile_timed(jax.value_and_grad(loss), p)
+    options = nj.compiler_options() or None
+    fwd, fwd_compile = compile_timed(loss, p, options=options)
+    vg, vg_compile = compile_timed(jax.value_and_grad(loss), p, options=options)
     t_fwd, value = median_time(fwd, p, repeats=repeats, number=auto_number(fwd, p))
     t_vg, (value2, grad) = median_time(vg, p, repeats=repeats, number=auto_number(vg, p))
 

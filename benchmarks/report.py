@@ -537,9 +537,11 @@ def _methodology(quick, batched):
     return f"""\
 - Work-precision: every method on each scene at rtol in the sweep, atol = 1e-3 rtol. nivpjax
   and diffrax: compiled once per configuration (tolerances, and diffrax's regularisation
-  strength, are inputs of one executable; compile = `jax.jit(f).lower(...).compile()`),
-  run = median over repeats of the mean of back-to-back calls of the jitted function after
-  compilation (JAX's C++ dispatch, as users call it; nivpjax returns the whole `Solution`).
+  strength, are inputs of one executable; compile = `jax.jit(f).lower(...).compile()`,
+  nivpjax with `nj.compiler_options()` as its own top-level programs, diffrax with XLA's
+  defaults as its users get it), run = median over repeats of the mean of back-to-back
+  calls of the jitted function after compilation (JAX's C++ dispatch, as users call it;
+  nivpjax returns the whole `Solution`).
   Both save every step into output buffers of `max_steps` rows, which are allocated and
   filled on every call: each run uses the smallest of 1024 or 16384 rows (diffrax: 1024,
   16384 or 100000) that holds it, as a user sizes `max_steps` for the job (each size is

@@ -1,5 +1,6 @@
 """Engine speed after compilation: plain-call overhead, repeated compat calls with rebuilt
-callbacks, the marginal cost of an adaptive attempt on the ball against diffrax `Kvaerno5`
+callbacks (a smooth model, and the reference's own example scripts against the reference),
+the marginal cost of an adaptive attempt on the ball against diffrax `Kvaerno5`
 on a penalty-regularised ball, and batch throughput of the bouncing ball, old path
 (`jax.jit(jax.vmap(...))`) against `Scene.sweep` / `nj.solve_batched` (ordered by
 restitution, chunked).
@@ -94,6 +95,43 @@ def compat_repeated(calls=5):
     return first, (time.perf_counter() - t) / calls
 
 
+def compat_scripts(calls=5, rtol=1e-3):
+    """The reference's own example scripts (its notebook settings for the ball, trapezoidal
+    + VI, and the Coulomb slider, composite + VI; `benchmarks.bench_reference`), each call
+    rebuilding its callbacks, through `nivpjax.compat.solve_ivp_ns` and through the
+    reference: (name, reference s per call, compat first call s, compat s per later call)."""
+    import contextlib
+    import io
+
+    import solve_nivp
+
+    from nivpjax.compat import solve_ivp_ns
+
+    from .bench_reference import _ref_ball, _ref_slider
+
+    rows = []
+    for name, script in (("ball", _ref_ball), ("slider", _ref_slider)):
+
+        def ours(script=script):
+            kwargs = script("VI", xp=jnp)
+            return solve_ivp_ns(**kwargs, rtol=rtol, atol=1e-3 * rtol)
+
+        def reference(script=script):
+            with contextlib.redirect_stdout(io.StringIO()):  # it prints on some paths
+                return solve_nivp.solve_ivp_ns(**script("VI"), rtol=rtol, atol=1e-3 * rtol)
+
+        t = time.perf_counter()
+        ours()
+        first = time.perf_counter() - t
+        t = time.perf_counter()
+        for _ in range(calls):
+            ours()
+        again = (time.perf_counter() - t) / calls
+        ref = best(reference, number=1, repeats=3)
+        rows.append((name, ref, first, again))
+    return rows
+
+
 def _ball_exact_steps(sol):
     return np.asarray(sol.n_accepted), np.asarray(sol.n_accepted + sol.n_rejected)
 
@@ -113,7 +151,7 @@ def batch(size, chunk, rtol=1e-3):
     t = time.perf_counter()
     sol_old = jax.block_until_ready(old(jnp.asarray(es)))
     c_old = time.perf_counter() - t
-    t_old = best(lambda: old(jnp.asarray(es)), number=1, repeats=2)
+    t_old = best(lambda: old(jnp.asarray(es)), number=1, repeats=5)
     acc_old = int(np.sum(np.asarray(sol_old.n_accepted)))
     waste_old = nj.lockstep_waste(sol_old)
 
@@ -124,7 +162,7 @@ def batch(size, chunk, rtol=1e-3):
     t = time.perf_counter()
     sol_new = jax.block_until_ready(sweep())
     c_new = time.perf_counter() - t
-    t_new = best(sweep, number=1, repeats=2)
+    t_new = best(sweep, number=1, repeats=5)
     acc_new = int(np.sum(np.asarray(sol_new.n_accepted)))
     waste_new = nj.lockstep_waste(sol_new, chunk_size=chunk, cost=es)
     same = np.array_equal(np.asarray(sol_old.n_accepted), np.asarray(sol_new.n_accepted))
@@ -205,6 +243,11 @@ def main(argv=None):
         f"compat solve_ivp_ns, callbacks rebuilt per call: first {first:.2f} s, "
         f"then {1e3 * again:.1f} ms per call ({first / again:.0f}x)"
     )
+    print("\nthe reference's example scripts, callbacks rebuilt per call, rtol 1e-3:")
+    print("| script | reference s per call | compat first call s | compat ms per call | ratio |")
+    print("|---|---:|---:|---:|---:|")
+    for name, ref, first, again in compat_scripts():
+        print(f"| {name} | {ref:.2f} | {first:.2f} | {1e3 * again:.1f} | {ref / again:.0f}x |")
     rows = attempt_cost()
     print("\nmarginal cost of an adaptive attempt, ball (e = 0.95, rtol 1e-4, t1 = 0.5 and 8):")
     print("| solver | attempts, t1 = 0.5 | call µs | attempts, t1 = 8 | call µs | µs per attempt |")

@@ -29,6 +29,8 @@ from .cases import CASES
 
 ATOL_FACTOR = 1e-3
 NJ_TIERS = (1024, 16384)  # output-buffer sizes (max_steps), see `BufferTiers`
+# nivpjax's own top-level programs compile with these (see `nj.compiler_options`).
+NJ_OPTIONS = nj.compiler_options() or None
 EQUAL_ERR_SLACK = 1.1  # nivpjax "equal or better" error: err <= 1.1 x the other's error
 REF_BROKEN = 0.5  # a reference error above this is a qualitatively wrong trajectory
 REG_TARGET_ERR = 1e-3  # the regularised-solver target applies below this error
@@ -114,7 +116,9 @@ def nivpjax_rows(case, configs, rtols, repeats, log):
             return solve
 
         tol = lambda r: (jnp.asarray(r), jnp.asarray(r * ATOL_FACTOR))
-        tiers = BufferTiers(build, NJ_TIERS, _nj_overflowed, *tol(rtols[0]), x0, args)
+        tiers = BufferTiers(
+            build, NJ_TIERS, _nj_overflowed, *tol(rtols[0]), x0, args, options=NJ_OPTIONS
+        )
         for i, rtol in enumerate(rtols):
             inputs = (*tol(rtol), x0, args)
             compiled, sol, once = tiers(*inputs)
