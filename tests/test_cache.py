@@ -225,3 +225,21 @@ def test_solves_under_an_outer_jit_give_the_top_level_answer():
 def test_a_failure_under_an_outer_jit_seen_only_in_a_closure_raises():
     with pytest.raises(RuntimeError, match="maximum number of time steps"):
         jax.block_until_ready(jax.jit(lambda k: _solve(decay(k), max_steps=2).y_final)(1.5))
+
+
+def test_filter_jit_with_options_works_at_top_level_and_nested():
+    # nivpjax.learn and nivpjax.rl compile their programs through this wrapper: with the
+    # compiler options at top level, without them under an outer jit (traced arguments,
+    # or constants only, where JAX refuses them at trace time).
+    from nivpjax._compiler import filter_jit
+
+    @filter_jit
+    def solve_final(k, y0):
+        return nj.solve(decay(k), 0.0, 1.0, y0, stepper=nj.BackwardEuler(), max_steps=256).y_final
+
+    top = solve_final(1.5, Y0)
+    traced = jax.jit(solve_final)(1.5, Y0)
+    constant = jax.jit(lambda: solve_final(1.5, Y0))()
+    for y in (traced, constant):
+        np.testing.assert_allclose(y, top, rtol=1e-13)
+    np.testing.assert_allclose(top, np.exp(-1.5) * np.asarray(Y0), rtol=0.1)
