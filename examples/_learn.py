@@ -21,10 +21,10 @@ import nivpjax as nj  # noqa: E402
 from nivpjax.learn import draw, evaluate, pretrained  # noqa: E402
 
 
-def main(name, iterations=10):
+def main(name, iterations=10, batch=8):
     parser = argparse.ArgumentParser()
     parser.add_argument("--iterations", type=int, default=iterations)
-    parser.add_argument("--batch", type=int, default=8)
+    parser.add_argument("--batch", type=int, default=batch)
     parser.add_argument("--no-save", action="store_true")
     opts = parser.parse_args()
     os.makedirs("examples/output", exist_ok=True)
