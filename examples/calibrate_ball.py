@@ -46,7 +46,7 @@ def main():
     exact = ball_state(TIMES, 1.0, 0.0, TRUTH["e"], 9.81)[0]
     data = jnp.asarray(noisy(exact, SIGMA))
     start = {"e": jnp.asarray(0.5)}
-    run = jax.jit(lambda p, d: nj.fit(residuals, p, d))
+    run = jax.jit(lambda p, d: nj.fit(residuals, p, d), compiler_options=nj.compiler_options())
     t0 = time.perf_counter()
     fit = jax.block_until_ready(run(start, data))
     print(f"compile + fit: {time.perf_counter() - t0:.1f} s")

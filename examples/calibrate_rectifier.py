@@ -57,7 +57,7 @@ def exact(times):
 def main():
     data = jnp.asarray(noisy(exact(TIMES), SIGMA))
     start = {"C_mF": jnp.asarray(0.06), "R_L_kohm": jnp.asarray(1.4)}
-    run = jax.jit(lambda p, d: nj.fit(residuals, p, d))
+    run = jax.jit(lambda p, d: nj.fit(residuals, p, d), compiler_options=nj.compiler_options())
     t0 = time.perf_counter()
     fit = jax.block_until_ready(run(start, data))
     print(f"compile + fit: {time.perf_counter() - t0:.1f} s")

@@ -57,7 +57,10 @@ def main():
     factors = np.array([[1.4, 0.6, 1.5], [0.7, 1.4, 0.6], [1.3, 1.3, 1.5], [0.65, 0.7, 0.5]])
     names = ["mu_s", "mu_k", "Dc"]
     starts = {n: jnp.asarray(TRUTH[n] * factors[:, i]) for i, n in enumerate(names)}
-    run = jax.jit(jax.vmap(lambda p, d: nj.fit(residuals, p, d, throw=False), (0, None)))
+    run = jax.jit(
+        jax.vmap(lambda p, d: nj.fit(residuals, p, d, throw=False), (0, None)),
+        compiler_options=nj.compiler_options(),
+    )
     t0 = time.perf_counter()
     fits = jax.block_until_ready(run(starts, data))
     print(f"compile + 4 fits (vmap): {time.perf_counter() - t0:.1f} s")

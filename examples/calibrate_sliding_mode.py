@@ -59,7 +59,10 @@ def main():
     factors = np.array([[1.4, 0.6], [0.6, 1.5], [1.5, 1.3]])
     names = ["k1", "k2"]
     starts = {n: jnp.asarray(TRUTH[n] * factors[:, i]) for i, n in enumerate(names)}
-    run = jax.jit(jax.vmap(lambda p, d: nj.fit(residuals, p, d, throw=False), (0, None)))
+    run = jax.jit(
+        jax.vmap(lambda p, d: nj.fit(residuals, p, d, throw=False), (0, None)),
+        compiler_options=nj.compiler_options(),
+    )
     t0 = time.perf_counter()
     fits = jax.block_until_ready(run(starts, data))
     print(f"compile + 3 fits (vmap): {time.perf_counter() - t0:.1f} s")

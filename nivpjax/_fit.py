@@ -80,7 +80,8 @@ def fit(
     parameter, the cheap direction when there are few parameters and many observations.
     Derivatives across impacts, slip reversals and relay switches include their event-time
     (saltation) terms. Jittable and `vmap`-able (e.g. over several starting points when the
-    loss has several minima).
+    loss has several minima); give such a `jax.jit` `compiler_options=nj.compiler_options()`
+    for nivpjax's shorter CPU compile.
 
     **Arguments:**
 
