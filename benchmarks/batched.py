@@ -144,9 +144,7 @@ def run_sweep(name, cfg, log):
         params = jnp.asarray(all_params[:n])
         rss0 = _maxrss_mb()
         t0 = time.perf_counter()
-        compiled = (
-            jax.jit(batched, compiler_options=nj.compiler_options() or None).lower(params).compile()
-        )
+        compiled = jax.jit(batched, compiler_options=nj.compiler_options()).lower(params).compile()
         compile_s = time.perf_counter() - t0
         mem = compiled.memory_analysis()
         xla_mb = (

@@ -108,7 +108,7 @@ CASES = {
     # The same options as nivpjax's programs (`nj.compiler_options()`), for comparison: the
     # ratios are against the peer as its users get it, with XLA's defaults.
     "diffrax Kvaerno5, penalty ball, nj.compiler_options()": lambda: _kvaerno_ball(
-        nj.compiler_options() or None
+        nj.compiler_options()
     ),
 }
 

@@ -52,7 +52,7 @@ def main(argv=None):
     a = parser.parse_args(argv)
     t1 = 3.0
     run, e = _make(a.steps, t1)
-    options = nj.compiler_options() or None  # as nivpjax's own top-level programs
+    options = nj.compiler_options()  # as nivpjax's own top-level programs
     single = jax.jit(run, compiler_options=options)
     seconds, sol = _best(single, jnp.asarray(e), a.repeats)
     n = int(sol.n_accepted) + int(sol.n_rejected)

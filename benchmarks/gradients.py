@@ -107,7 +107,7 @@ def run_problem(name, quick, log):
 
     p = jnp.asarray(prob["at"])
     repeats = 3 if quick else 7
-    options = nj.compiler_options() or None
+    options = nj.compiler_options()
     fwd, fwd_compile = compile_timed(loss, p, options=options)
     vg, vg_compile = compile_timed(jax.value_and_grad(loss), p, options=options)
     t_fwd, value = median_time(fwd, p, repeats=repeats, number=auto_number(fwd, p))

@@ -30,7 +30,7 @@ from .cases import CASES
 ATOL_FACTOR = 1e-3
 NJ_TIERS = (1024, 16384)  # output-buffer sizes (max_steps), see `BufferTiers`
 # nivpjax's own top-level programs compile with these (see `nj.compiler_options`).
-NJ_OPTIONS = nj.compiler_options() or None
+NJ_OPTIONS = nj.compiler_options()
 EQUAL_ERR_SLACK = 1.1  # nivpjax "equal or better" error: err <= 1.1 x the other's error
 REF_BROKEN = 0.5  # a reference error above this is a qualitatively wrong trajectory
 REG_TARGET_ERR = 1e-3  # the regularised-solver target applies below this error

@@ -31,7 +31,7 @@ import equinox as eqx
 import jax
 import numpy as np
 
-from ._compiler import compiler_options
+from ._compiler import call_top_level, compiler_options
 
 
 _HOIST_ERRORS = (
@@ -275,8 +275,10 @@ class CachedJit:
                 return self.fn(*_rebuild_tree(spec, iter(dynamic)))
 
             program_fn.__name__ = getattr(self.fn, "__name__", "program")
-            options = compiler_options() or None
-            programs = (jax.jit(program_fn, compiler_options=options), jax.jit(program_fn))
+            programs = (
+                jax.jit(program_fn, compiler_options=compiler_options()),
+                jax.jit(program_fn),
+            )
             self._programs[key] = programs
             while len(self._programs) > self.maxsize:
                 old, _ = self._programs.popitem(last=False)
@@ -299,15 +301,8 @@ class CachedJit:
         return out
 
     def _run(self, call: PreparedCall):
-        nested = call.signature is None
-        try:
-            return self._program(call.key, nested)(call.dynamic)
-        except ValueError as error:
-            # Under an outer `jit` whose arguments reach this call as constants only (no
-            # tracer among them): JAX refuses the top-level program's compiler options.
-            if nested or "top-level" not in str(error):
-                raise
-            return self._program(call.key, nested=True)(call.dynamic)
+        nested = call.signature is None  # a tracer among the arguments
+        return call_top_level(lambda n: self._program(call.key, n), nested, call.dynamic)
 
     def prepare_static(self, call: PreparedCall) -> PreparedCall:
         args = _rebuild_tree(call.key[1], iter(call.dynamic))

@@ -48,6 +48,19 @@ def compiler_options(backend: str | None = None) -> dict:
     return {name: value for name, value in _CPU.items() if _accepted(name, value)}
 
 
+def call_top_level(program, nested: bool, *args, **kwargs):
+    """`program(nested)(*args, **kwargs)`, where `program(False)` is compiled with
+    `compiler_options()` and `program(True)` without them. A call that looked top-level
+    (`nested=False`) but runs under an outer `jit` whose arguments reach it as constants
+    only is refused by JAX at trace time; it then goes through `program(True)`."""
+    try:
+        return program(nested)(*args, **kwargs)
+    except ValueError as error:
+        if nested or "top-level" not in str(error):
+            raise
+        return program(True)(*args, **kwargs)
+
+
 def filter_jit(fn):
     """`equinox.filter_jit` of `fn`, with `compiler_options()` when called at top level
     (built on the first call, so that importing nivpjax initialises no backend); a plain
@@ -57,18 +70,14 @@ def filter_jit(fn):
 
     def program(nested):
         if nested not in jitted:
-            options = None if nested else (compiler_options() or None)
-            jitted[nested] = eqx.filter_jit(fn, compiler_options=options)
+            jitted[nested] = eqx.filter_jit(
+                fn, compiler_options={} if nested else compiler_options()
+            )
         return jitted[nested]
 
     @functools.wraps(fn)
     def wrapper(*args, **kwargs):
         nested = any(isinstance(x, jax.core.Tracer) for x in jax.tree.leaves((args, kwargs)))
-        try:
-            return program(nested)(*args, **kwargs)
-        except ValueError as error:
-            if nested or "top-level" not in str(error):
-                raise
-            return program(True)(*args, **kwargs)
+        return call_top_level(program, nested, *args, **kwargs)
 
     return wrapper

@@ -212,11 +212,16 @@ def _solve_impl(
             is_leaf=lambda x: x is None,
         )
     if throw_inside:
-        sol = sol.result.error_if(sol, sol.result != RESULTS.successful)
+        sol = _error_if_failed(sol)
     return sol
 
 
 _solve_jit = CachedJit(_solve_impl)
+
+
+def _error_if_failed(sol: Solution) -> Solution:
+    # The failure check inside a traced program: raises when the program runs.
+    return sol.result.error_if(sol, sol.result != RESULTS.successful)
 
 
 def _raise_if_failed(sol: Solution) -> Solution:
@@ -224,7 +229,7 @@ def _raise_if_failed(sol: Solution) -> Solution:
     if isinstance(result._value, jax.core.Tracer):
         # Under an outer transformation that none of the arguments showed (a closure over
         # a traced value, or constants only inside an outer `jit`): check in its graph.
-        return result.error_if(sol, result != RESULTS.successful)
+        return _error_if_failed(sol)
     if np.ndim(result._value) != 0:
         failed = np.flatnonzero(np.asarray(result._value) != RESULTS.successful._value)
         if failed.size:

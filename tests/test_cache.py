@@ -207,15 +207,17 @@ def test_compiler_options_are_known_to_xla_and_dropped_when_not(monkeypatch):
 
 
 def test_solves_under_an_outer_jit_give_the_top_level_answer():
-    # Top level: nivpjax's compiler options. Under an outer jit (traced or constant
-    # arguments) JAX refuses nested compiler options: the same program without them.
+    # Top level: nivpjax's compiler options. Under an outer jit (traced arguments, a
+    # traced closure, or constants only) JAX refuses nested compiler options: the same
+    # program without them, and the failure check in the outer graph.
     f = decay(1.5)
     top = _solve(f)
     traced = jax.jit(
         lambda y0: nj.solve(f, 0.0, 1.0, y0, stepper=nj.BackwardEuler(), max_steps=256)
     )(Y0)
+    closure = jax.jit(lambda k: _solve(decay(k)))(1.5)  # raised before the fix
     constant = jax.jit(lambda: _solve(f))()
-    for sol in (traced, constant):
+    for sol in (traced, closure, constant):
         assert int(sol.n_accepted) == int(top.n_accepted)
         assert int(sol.n_rejected) == int(top.n_rejected)
         np.testing.assert_allclose(sol.ys, top.ys, rtol=1e-13, atol=1e-15)
