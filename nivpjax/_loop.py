@@ -190,6 +190,9 @@ def attempt(
     y_error = jnp.zeros_like(out.y1) if out.y_error is None else out.y_error
     violation = model.violation(s.t + h_try, h_try, s.y, out.y1, args)
     next_event = model.next_event(s.t + h_try, h_try, s.y, out.y1, args)
+    exit_violation, exit_time = model.held_exit(s.t + h_try, h_try, s.y, out.y1, args)
+    violation = jnp.maximum(violation, exit_violation)
+    next_event = jnp.minimum(next_event, exit_time)
     info = StepInfo(
         t0=s.t,
         h=h_try,

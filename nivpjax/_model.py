@@ -9,7 +9,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float
 
-from . import _linalg
+from . import _held, _linalg
 from ._projector import AbstractProjector, ProjectionContext
 from ._tangent import tangent_only
 
@@ -30,6 +30,8 @@ class Model(eqx.Module):
       equations with $O(1)$ sensitivity to their own unknowns (saturations, diodes with
       series resistance). Only the VI method's convergence depends on this; Newton does not.
     - `has_algebraic`: whether any row is algebraic (static).
+    - `has_selections`: whether any algebraic row is a selection row (static; see
+      `selection_rows`).
     - `unit_mass`: whether $A$ is the identity on the differential rows and zero on the
       algebraic ones (static; `Model.build` reads it off a concrete $A$). Products with
       $A$ and solves with its differential block are then masks.
@@ -43,6 +45,7 @@ class Model(eqx.Module):
     equation_rows: Bool[Array, " n"] | None = None
     has_algebraic: bool = eqx.field(static=True, default=False)
     unit_mass: bool = eqx.field(static=True, default=False)
+    has_selections: bool = eqx.field(static=True, default=False)
 
     @classmethod
     def build(cls, vector_field, projector, mass_matrix, algebraic, **kwargs) -> "Model":
@@ -50,6 +53,10 @@ class Model(eqx.Module):
         `mass_matrix` (a NumPy array, or `None` for the identity; stored as a JAX array
         of the same dtype)."""
         algebraic = np.asarray(algebraic, bool)
+        equation_rows = kwargs.get("equation_rows")
+        selections = algebraic
+        if equation_rows is not None:
+            selections = algebraic & ~np.asarray(equation_rows, bool)
         unit = True
         if mass_matrix is not None:
             unit = bool(np.array_equal(mass_matrix, np.diag((~algebraic).astype(float))))
@@ -61,6 +68,7 @@ class Model(eqx.Module):
             algebraic=algebraic,
             has_algebraic=bool(algebraic.any()),
             unit_mass=unit,
+            has_selections=bool(selections.any()),
             **kwargs,
         )
 
@@ -356,6 +364,8 @@ class Model(eqx.Module):
         rate there (what explicit parts of stages and embedded estimates read), and the
         local error of a switch moved to the start from `skipped` later, `skipped` times
         the jump of the rate (zero without one), for the steppers' estimates."""
+        if self.has_selections:
+            y0 = _held.held_start(self, t0, h, y0, args)
         f0 = self.f(t0, y0, args)
         if not self.projector.has_start_selection:
             return y0, f0, jnp.zeros_like(y0)
@@ -455,6 +465,17 @@ class Model(eqx.Module):
             t1, h, y0, y1, args, rate=rate, start_rate=start_rate, end_rate=self.to_state(rate)
         )
         return self.projector.violation(ctx)
+
+    def held_exit(self, t1, h, y0, y1, args):
+        """`(violation, time)` of a held phase (sliding, sticking on selection rows) that
+        ended and began again inside the step, which its two ends do not show (see
+        `nivpjax._held.held_exit`); `(0, inf)` without selection rows."""
+        if not self.has_selections:
+            zero = jnp.zeros((), y1.dtype)
+            return zero, jnp.full((), jnp.inf, y1.dtype)
+        rate0 = self._rate(t1 - h, y0, args)
+        rate1 = self._rate(t1, y1, args)
+        return _held.held_exit(self, t1, h, y0, y1, rate0, rate1, args)
 
     def next_event(self, t1, h, y0, y1, args):
         """Predicted time from `t1 - h` to the first event (see

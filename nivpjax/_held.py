@@ -1,0 +1,183 @@
+r"""Held phases: a multiplier kept inside its set by an algebraic constraint (a relay in
+sliding mode, a block stuck by cone friction), and the exits from them that a step's two
+ends do not show.
+
+A selection row $w$ (an algebraic row that is not an equation row) is *held* at a state
+when its projected equation is locally a translation in $w$ (the multiplier lies in the
+interior of its set): its row of $y - P(y - \rho R)$ is then a function
+$\sigma(t, x)$ of the time and the differential states alone, which the phase keeps at
+zero. Differentiating along the flow gives the hidden constraint
+
+$$ G(w) = \partial_t \sigma + \partial_x \sigma \cdot \dot x(t, x, w) = 0, $$
+
+whose solution is Filippov's equivalent control (a relay's $w = u(t)$ on $x' = -w + u$).
+The phase ends where it leaves the set. A step whose two ends are both held says nothing
+about what happened between them: backward Euler stepped over two whole excursions of a
+forced relay from sliding ($x' = -w + 1.3\sin 2t$, $w \in \operatorname{sign} x$: one step
+from $t = 4.37$ to $8$) and converged, as rtol fell, to a solution that slides forever.
+`held_exit` samples the equivalent control inside such a step."""
+
+import jax
+import jax.numpy as jnp
+
+from . import _linalg
+from ._projector import ProjectionContext
+
+
+# Interior sample points c = k / (SAMPLES + 1), k = 1..SAMPLES, of a step held at both ends.
+# The sampled excursion of the equivalent control must span more than 1/(SAMPLES + 1) of
+# the step to be seen; the steps that straddle one are long (error estimates see nothing
+# while the phase holds), and the excursions they hide are a sizeable part of them.
+SAMPLES = 8
+# A held row's hidden constraint determines its multiplier where G's dependence on the
+# multipliers is at least this fraction of |d sigma/dx| |dx'/dw| (see `_linearisation`).
+DETERMINED = 1e-3
+
+
+def held_exit(model, t1, h, y0, y1, rate0, rate1, args):
+    r"""`(violation, time)` for the step from `(t1 - h, y0)` to `(t1, y1)` of `model`:
+
+    - `violation`: where every selection row that moves is held at both ends, the
+      largest drift $h\,\|\dot x(w) - \dot x(P w)\|_\infty$ (state units) at the
+      interior sample points where the equivalent control $w$ lies outside its set
+      ($P w$ its projection): how far the state leaves the constraint over the step once
+      the phase has ended; 0 otherwise.
+    - `time`: from the step's start, the last sample point before the first one outside
+      the set (the controller retries up to there), `inf` if none.
+
+    Differential states at the samples come from the cubic Hermite interpolant of the
+    ends and their rates `rate0`, `rate1` (state units); multipliers from the linear one,
+    improved by one Newton step on $G(w) = 0$ (exact for $\dot x$ affine in $w$). No
+    gradient: it only decides steps."""
+    sg = jax.lax.stop_gradient
+    y0, y1, rate0, rate1 = sg(y0), sg(y1), sg(rate0), sg(rate1)
+    dtype = y1.dtype
+    inf = jnp.full((), jnp.inf, dtype)
+    t0 = t1 - h
+    alg = model.algebraic
+    project, sigma = _maps(model, h, args)
+    ends = jax.vmap(lambda t, y: _held(model, sigma, t, y))(
+        jnp.stack([t0, t1]), jnp.stack([y0, y1])
+    )
+    held = ends[0] & ends[1]
+    # One linearisation, at the step's end, serves every sample.
+    on, J, j_rate = _linearisation(model, sigma, held, t1, y1, args)
+
+    def at(c):
+        t = t0 + c * h
+        y = jnp.where(alg, (1 - c) * y0 + c * y1, _hermite(y0, y1, h * rate0, h * rate1, c))
+        y_eq = _newton(model, sigma, on, J, t, y, args)
+        y_set = jnp.where(held, project(t, y_eq), y_eq)
+        outside = jnp.any(held & (jnp.abs(y_set - y_eq) > _band(y_eq)))
+        drift = j_rate @ (y_eq - y_set)  # the rate's change, to first order
+        return jnp.where(outside, jnp.max(jnp.abs(drift)), 0.0), outside
+
+    c = jnp.arange(1, SAMPLES + 1, dtype=dtype) / (SAMPLES + 1)
+    drift, outside = jax.vmap(at)(c)
+    drift = jnp.where(jnp.isfinite(drift), drift, 0.0)
+    violation = jnp.where(h > 0, h * jnp.max(drift), 0.0)
+    first = jnp.argmax(outside)
+    time = jnp.where(jnp.any(outside), first / (SAMPLES + 1) * h, inf)
+    return sg(violation.astype(dtype)), sg(time.astype(dtype))
+
+
+def held_start(model, t0, h, y0, args):
+    r"""`y0` with every held selection row (see the module) replaced by the projection of
+    its equivalent control at $t_0$: the right-limit selection of the phase. The
+    multiplier a step ends with is the one its scheme needed, not the phase's: the
+    trapezoidal rule solves $w_1 = u_0 + u_1 - w_0$ in a sliding mode of
+    $x' = -w + u(t)$, so an error in $w_0$ comes back with its sign flipped at every step
+    (measured on a forced relay: `max_steps` exhausted at rtol 1e-5). With the equivalent
+    control at the start, $w_1 = u_1$. Where the equivalent control lies outside the set
+    (the phase ends at $t_0$: the flow leaves the constraint), its projection is the
+    selection of the side the flow goes to."""
+    project, sigma = _maps(model, h, args)
+    held = _held(model, sigma, t0, y0)
+    on, J, _ = _linearisation(model, sigma, held, t0, y0, args)
+    y_eq = _newton(model, sigma, on, J, t0, y0, args)
+    y_start = jnp.where(held, project(t0, y_eq), y0)
+    return jnp.where(jnp.all(jnp.isfinite(y_start)), y_start, y0)
+
+
+def _maps(model, h, args):
+    # The projection of a state onto the sets, and the rows of y - P(y - rho R) of the
+    # instantaneous residual R (-f on algebraic rows, 0 on differential ones), with the
+    # stage's scaling rho for a step of size h.
+    alg = model.algebraic
+    safe_h = jnp.where(h > 0, h, 1.0)
+    rho = jnp.where(alg, model.tau / safe_h, safe_h)
+
+    def context(t, y):
+        return ProjectionContext(
+            t=t, h=safe_h, y_prev=y, y_iter=y, rho=rho.astype(y.dtype), args=args
+        )
+
+    def project(t, y):
+        return model.projector(y, context(t, y))
+
+    def sigma(t, y):
+        z = y + jnp.where(alg, rho * model.f(t, y, args), 0.0)
+        return y - model.projector(z, context(t, y))
+
+    return project, sigma
+
+
+def _band(y):
+    # How far a value may move under a projection and still count as unmoved.
+    return 64 * jnp.finfo(y.dtype).eps * (1.0 + jnp.abs(y))
+
+
+def _held(model, sigma, t, y):
+    # Selection rows whose projected equation is a translation in their own value near
+    # `y`: perturbations of the multiplier either way pass through the projection
+    # unchanged, so sigma takes the same value at both (interior of the set); at a bound
+    # one of them is clipped and sigma moves with the other.
+    d = jnp.sqrt(jnp.finfo(y.dtype).eps) * (1.0 + jnp.abs(y))
+    d = jnp.where(model.algebraic, d, 0.0)
+    plus, minus = jax.vmap(lambda u: sigma(t, u))(jnp.stack([y + d, y - d]))
+    same = jnp.abs(plus - minus) <= 1e-3 * d
+    return model.selection_rows & same
+
+
+def _hermite(y0, y1, m0, m1, c):
+    return (
+        (1 + 2 * c) * (1 - c) ** 2 * y0
+        + c * (1 - c) ** 2 * m0
+        + c**2 * (3 - 2 * c) * y1
+        + c**2 * (c - 1) * m1
+    )
+
+
+def _linearisation(model, sigma, held, t, y, args):
+    # `(on, J, j_rate)`: the held rows whose hidden constraint G(w) = d sigma / dt along the flow
+    # determines their multiplier, and G's Jacobian in w, sigma_x . dx'/dw (without the
+    # curvature of sigma along the flow), at (t, y); no gradient. A row takes part only
+    # where G depends on the multipliers about as strongly as |sigma_x| |dx'/dw| allows:
+    # in a second-order sliding mode (super-twisting: u = -k1 sqrt|s| w + nu,
+    # nu' = -k2 w) w drives x' but hardly the first derivative of the surface, which only
+    # the second determines; a Newton step on G then divides by sqrt|s| ~ 0 (measured:
+    # 1200 rejections of steps whose ends slid correctly). `j_rate`: dx'/dw on the held
+    # columns.
+    y = jax.lax.stop_gradient(y)
+    diff = ~model.algebraic
+    j_sigma = jnp.where(diff[None, :], jax.jacfwd(lambda yy: sigma(t, yy))(y), 0.0)
+    j_rate = jnp.where(held[None, :], jax.jacfwd(lambda yy: _rate(model, t, yy, args))(y), 0.0)
+    J = j_sigma @ j_rate
+    reach = jnp.linalg.norm(j_sigma, axis=1) * jnp.max(jnp.linalg.norm(j_rate, axis=0))
+    strength = jnp.max(jnp.abs(jnp.where(held[None, :], J, 0.0)), axis=1)
+    on = held & (strength > DETERMINED * reach) & (reach > 0)
+    return jax.lax.stop_gradient((on, J, j_rate))
+
+
+def _rate(model, t, y, args):
+    return model.to_state(model.f(t, y, args))
+
+
+def _newton(model, sigma, on, J, t, y, args):
+    # One Newton step on G(w) = 0 over the rows `on`, from `y`, with the Jacobian `J`
+    # (exact for x' affine in w); other rows unchanged.
+    g = jax.jvp(sigma, (t, y), (jnp.ones_like(t), _rate(model, t, y, args)))[1]
+    pair = on[:, None] & on[None, :]
+    eye = jnp.eye(y.shape[0], dtype=y.dtype)
+    step = _linalg.solve_or_nan(jnp.where(pair, J, eye), jnp.where(on, g, 0.0))
+    return jnp.where(on, y - step, y)
