@@ -60,10 +60,8 @@ def held_exit(model, t1, h, y0, y1, rate0, rate1, args):
         jnp.stack([t0, t1]), jnp.stack([y0, y1])
     )
     held = ends[0] & ends[1]
-    # One linearisation, at the step's end, serves every sample.
-    on, J, j_rate = _linearisation(model, sigma, held, t1, y1, args)
 
-    def at(c):
+    def at(c, on, J, j_rate):
         t = t0 + c * h
         y = jnp.where(alg, (1 - c) * y0 + c * y1, _hermite(y0, y1, h * rate0, h * rate1, c))
         y_eq = _newton(model, sigma, on, J, t, y, args)
@@ -72,8 +70,18 @@ def held_exit(model, t1, h, y0, y1, rate0, rate1, args):
         drift = j_rate @ (y_eq - y_set)  # the rate's change, to first order
         return jnp.where(outside, jnp.max(jnp.abs(drift)), 0.0), outside
 
-    c = jnp.arange(1, SAMPLES + 1, dtype=dtype) / (SAMPLES + 1)
-    drift, outside = jax.vmap(at)(c)
+    def samples(_):
+        # One linearisation, at the step's end, serves every sample.
+        on, J, j_rate = _linearisation(model, sigma, held, t1, y1, args)
+        c = jnp.arange(1, SAMPLES + 1, dtype=dtype) / (SAMPLES + 1)
+        sampled = lambda _: jax.vmap(lambda c: at(c, on, J, j_rate))(c)  # noqa: E731
+        return jax.lax.cond(jnp.any(on), sampled, nothing, None)
+
+    def nothing(_):
+        return jnp.zeros((SAMPLES,), dtype), jnp.zeros((SAMPLES,), bool)
+
+    # Most steps hold nothing at both ends: skip the samples (a select under vmap).
+    drift, outside = jax.lax.cond(jnp.any(held), samples, nothing, None)
     drift = jnp.where(jnp.isfinite(drift), drift, 0.0)
     violation = jnp.where(h > 0, h * jnp.max(drift), 0.0)
     first = jnp.argmax(outside)
@@ -93,10 +101,14 @@ def held_start(model, t0, h, y0, args):
     selection of the side the flow goes to."""
     project, sigma = _maps(model, h, args)
     held = _held(model, sigma, t0, y0)
-    on, J, _ = _linearisation(model, sigma, held, t0, y0, args)
-    y_eq = _newton(model, sigma, on, J, t0, y0, args)
-    y_start = jnp.where(held, project(t0, y_eq), y0)
-    return jnp.where(jnp.all(jnp.isfinite(y_start)), y_start, y0)
+
+    def start(y0):
+        on, J, _ = _linearisation(model, sigma, held, t0, y0, args)
+        y_eq = _newton(model, sigma, on, J, t0, y0, args)
+        y_start = jnp.where(held, project(t0, y_eq), y0)
+        return jnp.where(jnp.all(jnp.isfinite(y_start)), y_start, y0)
+
+    return jax.lax.cond(jnp.any(held), start, lambda y0: y0, y0)
 
 
 def _maps(model, h, args):
