@@ -21,6 +21,7 @@ import jax
 import jax.numpy as jnp
 
 from . import _linalg
+from ._hermite import cubic_hermite
 from ._projector import ProjectionContext
 
 
@@ -63,7 +64,7 @@ def held_exit(model, t1, h, y0, y1, rate0, rate1, args):
 
     def at(c, on, J, j_rate):
         t = t0 + c * h
-        y = jnp.where(alg, (1 - c) * y0 + c * y1, _hermite(y0, y1, h * rate0, h * rate1, c))
+        y = jnp.where(alg, (1 - c) * y0 + c * y1, cubic_hermite(y0, y1, h * rate0, h * rate1, c))
         y_eq = _newton(model, sigma, on, J, t, y, args)
         y_set = jnp.where(held, project(t, y_eq), y_eq)
         outside = jnp.any(held & (jnp.abs(y_set - y_eq) > _band(y_eq)))
@@ -149,15 +150,6 @@ def _held(model, sigma, t, y):
     plus, minus = jax.vmap(lambda u: sigma(t, u))(jnp.stack([y + d, y - d]))
     same = jnp.abs(plus - minus) <= 1e-3 * d
     return model.selection_rows & same
-
-
-def _hermite(y0, y1, m0, m1, c):
-    return (
-        (1 + 2 * c) * (1 - c) ** 2 * y0
-        + c * (1 - c) ** 2 * m0
-        + c**2 * (3 - 2 * c) * y1
-        + c**2 * (c - 1) * m1
-    )
 
 
 def _linearisation(model, sigma, held, t, y, args):

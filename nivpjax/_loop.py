@@ -6,6 +6,7 @@ import jax
 import jax.numpy as jnp
 
 from ._controller import AbstractController, StepInfo
+from ._hermite import cubic_hermite
 from ._model import Model
 from ._results import RESULTS
 from ._solution import AttemptLog, Solution
@@ -361,12 +362,7 @@ def interpolate(sol: Solution, t_eval, model: Model | None = None, args=None):
         ya, ra, rb = ends(ta, ya, safe_tb, yb)
         linear = ya + w * (yb - ya)
         h = span[:, None]
-        hermite = (
-            (1 + 2 * w) * (1 - w) ** 2 * ya
-            + w * (1 - w) ** 2 * h * ra
-            + w**2 * (3 - 2 * w) * yb
-            + w**2 * (w - 1) * h * rb
-        )
+        hermite = cubic_hermite(ya, yb, h * ra, h * rb, w)
         # Rows a projector moves carry reactions the vector field does not contain (a
         # resting contact's force, friction ramping through a stick): their end rates
         # are not the state's, and they are interpolated linearly.

@@ -11,6 +11,7 @@ from jaxtyping import Array, Bool, Float
 
 from . import _held, _linalg
 from ._projector import AbstractProjector, ProjectionContext
+from ._projector.located import locate_selections
 from ._tangent import tangent_only
 
 
@@ -51,12 +52,14 @@ class Model(eqx.Module):
     def build(cls, vector_field, projector, mass_matrix, algebraic, **kwargs) -> "Model":
         """A model whose static flags are read off the concrete `algebraic` rows and
         `mass_matrix` (a NumPy array, or `None` for the identity; stored as a JAX array
-        of the same dtype)."""
+        of the same dtype), with interval and orthant blocks on selection rows
+        event-located on their residual (`locate_selections`)."""
         algebraic = np.asarray(algebraic, bool)
         equation_rows = kwargs.get("equation_rows")
         selections = algebraic
         if equation_rows is not None:
             selections = algebraic & ~np.asarray(equation_rows, bool)
+        projector = locate_selections(projector, vector_field, selections)
         unit = True
         if mass_matrix is not None:
             unit = bool(np.array_equal(mass_matrix, np.diag((~algebraic).astype(float))))

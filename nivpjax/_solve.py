@@ -15,7 +15,6 @@ from ._loop import interpolate, run
 from ._model import Model
 from ._progress_meter import progress_callback
 from ._projector import AbstractProjector
-from ._projector.located import locate_selections
 from ._results import RESULTS
 from ._solution import Solution
 from ._stepper import AbstractStepper
@@ -130,8 +129,6 @@ def solve(
     t1 = v.as_array(t1, dtype)
     error_mask = v.check_error_mask(controller, algebraic, n)
     t_eval = v.check_t_eval(t_eval, dtype, t0_c, t1_c)
-    selections = algebraic if equation_rows is None else algebraic & ~equation_rows
-    projector = locate_selections(projector, vector_field, selections)
     model = Model.build(
         vector_field,
         projector,

@@ -85,21 +85,21 @@ def _relay_exact(ts, x0, A, W, T):
     return out
 
 
-@functools.cache
-def _relay_solver(name, form):
+def _native_solver(field, y0, projector, mass, name):
+    # A jitted solve of the native problem `field` with the stepper `name`, under the
+    # default PID at (rtol, atol = rtol / 100): `run(args, t1, rtol)`.
     stepper = STEPPERS[name]()
-    projector = RELAY_PROJECTORS[form]
 
-    def run(args, rtol):
+    def run(args, t1, rtol):
         controller = nj.PIDController(rtol=rtol, atol=rtol / 100)
         return nj.solve(
-            _relay_field,
+            field,
             0.0,
-            args["T"],
-            jnp.array([0.3, 1.0]),
+            t1,
+            jnp.asarray(y0),
             args,
             projector=projector,
-            mass_matrix=RELAY_MASS,
+            mass_matrix=mass,
             stepper=stepper,
             controller=controller,
             max_steps=MAX_STEPS,
@@ -109,9 +109,14 @@ def _relay_solver(name, form):
     return jax.jit(run)
 
 
+@functools.cache
+def _relay_solver(name, form):
+    return _native_solver(_relay_field, [0.3, 1.0], RELAY_PROJECTORS[form], RELAY_MASS, name)
+
+
 def _relay_error(name, form, A, W, rtol, T=8.0):
-    args = {"A": jnp.asarray(A), "W": jnp.asarray(W), "T": jnp.asarray(T)}
-    sol = _relay_solver(name, form)(args, rtol)
+    args = {"A": jnp.asarray(A), "W": jnp.asarray(W)}
+    sol = _relay_solver(name, form)(args, T, rtol)
     assert sol.result == nj.RESULTS.successful, (name, form, A, W, rtol)
     k = int(sol.n_accepted)
     ts = np.asarray(sol.ts[: k + 1])
@@ -154,25 +159,7 @@ SPIRAL_PROJECTOR = nj.BlockProjector([([2, 3], nj.Box(-1.0, 1.0))])
 
 @functools.cache
 def _spiral_solver(name):
-    stepper = STEPPERS[name]()
-
-    def run(args, t1, rtol):
-        controller = nj.PIDController(rtol=rtol, atol=rtol / 100)
-        return nj.solve(
-            _spiral_field,
-            0.0,
-            t1,
-            jnp.array([5.0, 8.0, 1.0, 1.0]),
-            args,
-            projector=SPIRAL_PROJECTOR,
-            mass_matrix=SPIRAL_MASS,
-            stepper=stepper,
-            controller=controller,
-            max_steps=MAX_STEPS,
-            throw=False,
-        )
-
-    return jax.jit(run)
+    return _native_solver(_spiral_field, [5.0, 8.0, 1.0, 1.0], SPIRAL_PROJECTOR, SPIRAL_MASS, name)
 
 
 # The flow is self-similar in S (time scales as 1/S), so S varies with the coupling a.
