@@ -159,9 +159,10 @@ def _linearisation(model, sigma, held, t, y, args):
     # where G depends on the multipliers about as strongly as |sigma_x| |dx'/dw| allows:
     # in a second-order sliding mode (super-twisting: u = -k1 sqrt|s| w + nu,
     # nu' = -k2 w) w drives x' but hardly the first derivative of the surface, which only
-    # the second determines; a Newton step on G then divides by sqrt|s| ~ 0 (measured:
-    # 1200 rejections of steps whose ends slid correctly). `j_rate`: dx'/dw on the held
-    # columns.
+    # the second determines; a Newton step on G then divides by sqrt|s| ~ 0 (measured on
+    # 81 super-twisting runs: 17 failures and 1.5x the attempts without this rule, against
+    # 10; c = 3, L = 5 at rtol 1e-2 ran into max_steps, see
+    # tests/test_filippov_trust.py). `j_rate`: dx'/dw on the held columns.
     y = jax.lax.stop_gradient(y)
     diff = ~model.algebraic
     j_sigma = jnp.where(diff[None, :], jax.jacfwd(lambda yy: sigma(t, yy))(y), 0.0)

@@ -189,3 +189,27 @@ def test_spiral_through_zeno_point(name, S, a):
     # Off the switches every scheme is exact here (piecewise linear flow): a run whose
     # error is at round-off of the switch times already cannot fall further.
     assert errors[1] <= max(errors[0] / 5, 1e-7), errors
+
+
+@pytest.mark.parametrize("name", ["be", "bathe"])
+def test_second_order_sliding_is_not_checked_as_first_order(name):
+    # Super-twisting holds w inside [-1, 1] while sigma = 0, but w enters sigma's first
+    # derivative only through sqrt|sigma| ~ 0: its equivalent control is fixed one
+    # derivative further down. Sampling a Newton step on the first derivative there
+    # rejected step after step (c = 3, L = 5 at rtol 1e-2: 150 + 124 attempts with Bathe,
+    # over 10 000 rejected ones and max_steps without the rule).
+    scene, x0, args = nj.scenes.super_twisting(c=3.0, lipschitz=5.0)
+    controller = nj.PIDController(rtol=1e-2, atol=1e-5)
+    sol = scene.solve(
+        0.0,
+        6.0,
+        x0,
+        args,
+        stepper=STEPPERS[name](),
+        controller=controller,
+        max_steps=2000,
+        throw=False,
+    )
+    assert sol.result == nj.RESULTS.successful
+    x = np.asarray(sol.y_final)
+    assert abs(x[1] + 3.0 * x[0]) <= 1e-2  # on the sliding surface at the end
