@@ -258,3 +258,24 @@ def ball_stack(n=10, radius=0.5, restitution=0.0, gravity=9.81, spacing=0.0):
     q0 = radius + np.arange(n) * (2 * radius + spacing)
     x0 = _f(np.concatenate([q0, np.zeros(n)]))
     return Scene(dynamics, 2 * n, (contact,)), x0, {"e": _f(restitution), "g": _f(gravity)}
+
+
+def filippov_spiral(stiffness=300.0, coupling=0.02, x0=(5.0, 8.0)):
+    r"""A Filippov spiral into a Zeno point: $x' = -B w$, $w \in \operatorname{sign}(x)$
+    componentwise, with
+
+    $$ B = S \begin{pmatrix} a & 1 - a \\ -(1 - a) & a \end{pmatrix}. $$
+
+    Inside each open quadrant $V = |x_1| + |x_2|$ falls at exactly $2 S a$
+    ($V' = -\operatorname{sign}(x)^\top B \operatorname{sign}(x)$), so the state spirals
+    into the origin at $t^* = V(0) / (2 S a)$ after infinitely many switchings, and rests
+    there with $w$ inside the box. Large $S$ makes the switchings stiff. State
+    $x = (x_1, x_2)$, multiplier `"w"` (two components)."""
+
+    def dynamics(t, x, a, m):
+        s, c = a["S"], a["a"]
+        B = s * jnp.stack([jnp.stack([c, 1 - c]), jnp.stack([c - 1, c])])
+        return -B @ m["w"]
+
+    scene = Scene(dynamics, 2, (Relay("w", lambda t, x, a: x, n=2),))
+    return scene, _f(list(x0)), {"S": _f(stiffness), "a": _f(coupling)}

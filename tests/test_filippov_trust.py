@@ -8,14 +8,19 @@ order p under local error control (1/2 for backward Euler and the BE/TR pair, 2/
 second-order schemes), and its error falls as rtol does."""
 
 import functools
+import sys
+from pathlib import Path
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from scipy.optimize import brentq
 
 import nivpjax as nj
+
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "examples"))
+from _references_switching import forced_relay_exact  # noqa: E402
 
 
 STEPPERS = {
@@ -45,44 +50,6 @@ RELAY_PROJECTORS = {
     "box": nj.BlockProjector([([1], nj.Box(-1.0, 1.0))]),
     "sign": nj.SignResolvent([0], [1]),
 }
-
-
-def _relay_exact(ts, x0, A, W, T):
-    """The Filippov solution at `ts`, piece by piece in closed form: off the surface
-    x' = -s + A sin(W t) with s = sign(x); on it, sliding while |A sin(W t)| < 1."""
-    U = lambda t: -A / W * np.cos(W * t)  # noqa: E731
-    pieces = []  # (start, end, s, x at start); s = 0 for sliding
-    t, x = 0.0, x0
-
-    def first_zero(g, t, sign):
-        grid = np.linspace(t, T, int((T - t) * 4000) + 2)
-        vals = g(grid)
-        hit = np.flatnonzero((vals[1:] * sign <= 0) & (grid[1:] > t + 1e-9))
-        if not hit.size:
-            return T
-        i = hit[0]
-        return brentq(g, grid[i], grid[i + 1], xtol=1e-15)
-
-    left = False  # just left a sliding piece: leave the surface now
-    while t < T - 1e-12:
-        if x == 0.0 and not left and abs(A * np.sin(W * t)) < 1:
-            end = first_zero(lambda s: 1 - np.abs(A * np.sin(W * s)), t, 1.0)
-            pieces.append((t, end, 0.0, 0.0))
-            t, left = end, True
-            continue
-        left = False
-        s = np.sign(x) if x != 0.0 else np.sign(A * np.sin(W * (t + 1e-9)))
-        x_t, t_a = x, t
-        end = first_zero(lambda u: x_t - s * (u - t_a) + U(u) - U(t_a), t, s)
-        pieces.append((t, end, s, x))
-        t, x = end, 0.0
-    out = np.empty(len(ts))
-    for i, tq in enumerate(ts):
-        for a, b, s, xa in pieces:
-            if a - 1e-14 <= tq <= b + 1e-14:
-                out[i] = xa - s * (tq - a) + U(tq) - U(a) if s else 0.0
-                break
-    return out
 
 
 def _native_solver(field, y0, projector, mass, name):
@@ -121,7 +88,7 @@ def _relay_error(name, form, A, W, rtol, T=8.0):
     k = int(sol.n_accepted)
     ts = np.asarray(sol.ts[: k + 1])
     assert ts[-1] == pytest.approx(T)
-    exact = _relay_exact(ts, 0.3, A, W, T)
+    exact = forced_relay_exact(ts, 0.3, A, W, T)
     return np.max(np.abs(np.asarray(sol.ys[: k + 1, 0]) - exact))
 
 

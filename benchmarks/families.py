@@ -1,0 +1,328 @@
+"""The scene families of the reliability campaign: a scene of `nivpjax.scenes`, a grid of
+its parameters, a horizon, an exact (or converged event-driven) reference written without
+nivpjax (`examples/_references_*.py`), and the constant `C` of the rule
+`error <= C rtol^q`.
+
+`C` was set before the campaign ran, from each family's scale: 2 where the states are O(1)
+and errors do not grow between events (relays, spirals, blocks), 5 where an error made at
+one event is carried and amplified by the dynamics after it (impacts, stick-slip,
+rectifiers, super-twisting), 20 for Chua's circuit (chaotic; a short horizon of 5). These
+are the constants of second-order schemes; first-order ones get `FIRST_ORDER_FACTOR` = 4
+times as much. That factor was added after the first quick run (one C for both orders
+before): a first-order scheme's local errors add up over more steps, undamped where the
+flow is a free flight or a constant deceleration, about T sqrt(|y''| tol / 2) at the
+tolerance (the ball: backward Euler 0.068 at rtol 1e-4 against a bound of 0.05, falling
+2.8x per decade, i.e. proportional with a larger constant; the block: 2.1 rtol^(1/2)).
+
+Errors: the largest max-norm error of the scene's states (multipliers excluded) over the
+method's accepted points, against the reference at the same times. The ball uses the
+height only: a velocity error is O(1) next to every impact for any impact time off by a
+little, while the height error is bounded by speed x timing error.
+"""
+
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+import nivpjax as nj
+
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "examples"))
+from _references_mechanics import ball_state, block_state, slider_event_driven  # noqa: E402
+from _references_switching import (  # noqa: E402
+    RectifierReference,
+    chua_reference,
+    forced_relay_exact,
+    super_twisting_reference,
+)
+
+
+FIRST_ORDER_FACTOR = 4.0
+
+
+@dataclass(frozen=True)
+class Family:
+    name: str
+    effect: str  # the effect of `nivpjax` it exercises
+    title: str
+    make: object  # params -> (scene, x0, args); the scene's structure is the same for all
+    grid: tuple  # parameter dicts
+    t1: float
+    error: object  # (params, ts, xs) -> float
+    C: float
+    h_max: float | None = None
+
+    def constant(self, order):
+        """`C` of the rule for a stepper of the given order (see the module)."""
+        return FIRST_ORDER_FACTOR * self.C if order == 1 else self.C
+
+
+def _floats(args):
+    return {k: float(v) for k, v in args.items()}
+
+
+def _max_error(xs, exact):
+    return float(np.max(np.abs(np.asarray(xs) - exact)))
+
+
+# --- Forced relay: x' = -w + A sin(W t), entering and leaving sliding. ----------------
+
+
+def _relay_make(p):
+    return nj.scenes.relay(amplitude=p["A"], frequency=p["W"] / (2 * np.pi), x0=0.3)
+
+
+def _relay_error(p, ts, xs):
+    return _max_error(xs[:, 0], forced_relay_exact(ts, 0.3, p["A"], p["W"], 8.0))
+
+
+RELAY = Family(
+    "relay",
+    "Relay",
+    "Forced relay x' = -w + A sin(Wt), w in sign(x): sliding entries and exits",
+    _relay_make,
+    ({"A": 1.3, "W": 2.0}, {"A": 1.05, "W": 1.0}, {"A": 2.0, "W": 5.0}, {"A": 3.0, "W": 3.0}),
+    8.0,
+    _relay_error,
+    2.0,
+)
+
+
+# --- Filippov spiral into a Zeno point. ---------------------------------------------
+
+
+def _spiral_make(p):
+    return nj.scenes.filippov_spiral(stiffness=p["S"], coupling=p["a"], x0=(5.0, 8.0))
+
+
+def _spiral_error(p, ts, xs):
+    # V = |x1| + |x2| falls at exactly 2 S a until the origin (relative to V0 = 13).
+    V = np.abs(xs[:, 0]) + np.abs(xs[:, 1])
+    exact = np.maximum(13.0 - 2 * p["S"] * p["a"] * ts, 0.0)
+    return float(np.max(np.abs(V - exact)) / 13.0)
+
+
+# The flow is self-similar in S (time scales as 1/S): the horizon is 2 t*, t* = 13/(2 S a),
+# so the grid keeps 2 S a = 12 (t* = 13/12) and varies the stiffness S and coupling a.
+SPIRAL = Family(
+    "spiral",
+    "Relay (n = 2), Zeno point",
+    "Filippov spiral x' = -B w into its Zeno point (S = 10 to 1e4)",
+    _spiral_make,
+    ({"S": 300.0, "a": 0.02}, {"S": 20.0, "a": 0.3}, {"S": 60.0, "a": 0.1}, {"S": 1e4, "a": 6e-4}),
+    13 / 6,
+    _spiral_error,
+    2.0,
+)
+
+
+# --- Stick-slip with slip weakening (mu_s > mu_k), driven. ---------------------------
+
+
+def _slider_make(p):
+    return nj.scenes.spring_slider(
+        mu_static=p["mu_s"],
+        mu_kinetic=p["mu_k"],
+        slip_scale=p["Dc"],
+        drive_velocity=p["V"],
+        velocity=0.0,
+    )
+
+
+def _slider_error(p, ts, xs):
+    _, _, args = _slider_make(p)
+    s, v, _ = slider_event_driven(_floats(args), 0.0, 0.0, 20.0, ts)
+    return _max_error(xs, np.stack([s, v], axis=-1))
+
+
+STICK_SLIP = Family(
+    "stick_slip",
+    "Friction, slip-weakening bound",
+    "Driven spring-slider, slip-weakening friction mu_s > mu_k (stick-slip cycles)",
+    _slider_make,
+    (
+        {"mu_s": 0.6, "mu_k": 0.3, "Dc": 0.5, "V": 0.2},
+        {"mu_s": 0.5, "mu_k": 0.4, "Dc": 0.1, "V": 0.5},
+    ),
+    20.0,
+    _slider_error,
+    5.0,
+)
+
+
+# --- The bouncing ball through its Zeno point. ----------------------------------------
+
+
+def _ball_make(p):
+    return nj.scenes.bouncing_ball(restitution=p["e"], height=p["H"])
+
+
+def _ball_error(p, ts, xs):
+    q, _ = ball_state(ts, p["H"], 0.0, p["e"], 9.81)
+    return _max_error(xs[:, 0], q)
+
+
+BALL = Family(
+    "ball_zeno",
+    "Contact, Zeno point",
+    "Bouncing ball through its Zeno point (rests on the floor after it)",
+    _ball_make,
+    ({"e": 0.8, "H": 1.0}, {"e": 0.5, "H": 2.0}),
+    5.0,  # Zeno at 4.06 (e = 0.8, H = 1) and 1.91 (e = 0.5, H = 2)
+    _ball_error,
+    5.0,
+)
+
+
+# --- A block sliding to rest: interval (1-D) and second-order-cone friction. -------
+
+
+def _interval_make(p):
+    return nj.scenes.spring_slider(
+        stiffness=0.0, mu_static=p["mu"], mu_kinetic=p["mu"], velocity=p["v0"]
+    )
+
+
+def _interval_error(p, ts, xs):
+    # Normal force N = 1 on a unit mass: deceleration mu (the scene's g is N / m = 1).
+    pos, vel, _ = block_state(ts, (p["v0"], 0.0), p["mu"], 1.0)
+    return _max_error(xs, np.stack([pos[:, 0], vel[:, 0]], axis=-1))
+
+
+BLOCK_INTERVAL = Family(
+    "block_interval",
+    "Friction (interval)",
+    "Block sliding to rest under Coulomb friction (1-D, interval)",
+    _interval_make,
+    ({"mu": 0.2, "v0": 1.0}, {"mu": 0.5, "v0": 2.0}),
+    10.0,
+    _interval_error,
+    2.0,
+)
+
+
+def _cone_make(p):
+    return nj.scenes.block_on_plane(mu=p["mu"], velocity=(p["vx"], p["vy"]), cone=True)
+
+
+def _cone_error(p, ts, xs):
+    pos, vel, _ = block_state(ts, (p["vx"], p["vy"]), p["mu"], 9.81)
+    zero = np.zeros((len(ts), 1))
+    return _max_error(xs, np.concatenate([pos, zero, vel, zero], axis=-1))
+
+
+BLOCK_CONE = Family(
+    "block_cone",
+    "SetValued (second-order cone)",
+    "Block on a plane to rest, contact and friction in one second-order cone",
+    _cone_make,
+    ({"mu": 0.3, "vx": 2.0, "vy": 1.0}, {"mu": 0.6, "vx": 1.0, "vy": -3.0}),
+    2.0,
+    _cone_error,
+    2.0,
+)
+
+
+# --- Rectifiers: half wave and diode bridge. -------------------------------------------
+
+_RECTIFIER_REFS = {}
+
+
+def _rectifier_family(name, full):
+    maker = nj.scenes.diode_bridge if full else nj.scenes.half_wave_rectifier
+
+    def make(p):
+        return maker(R_L=p["R_L"], C=p["C"])
+
+    def error(p, ts, xs):
+        key = (name, p["R_L"], p["C"])
+        if key not in _RECTIFIER_REFS:
+            a = _floats(make(p)[2])
+            _RECTIFIER_REFS[key] = RectifierReference(
+                a["V"], a["omega"], a["R_s"], a["R_L"], a["C"], 0.06, full=full
+            )
+        return _max_error(xs[:, 0], _RECTIFIER_REFS[key].v(ts))
+
+    title = "Diode bridge (full wave)" if full else "Half-wave rectifier"
+    return Family(
+        name,
+        "Diode (n = 2)" if full else "Diode",
+        f"{title}, RC load, 3 periods of 50 Hz (h_max = 1 ms)",
+        make,
+        ({"R_L": 1000.0, "C": 1e-4}, {"R_L": 100.0, "C": 2e-4}),
+        0.06,
+        error,
+        5.0,
+        h_max=1e-3,
+    )
+
+
+# --- Chua's circuit and super-twisting. ------------------------------------------------
+
+
+def _chua_make(p):
+    return nj.scenes.chua(x0=(p["x0"], 0.0, 0.0))
+
+
+def _chua_error(p, ts, xs):
+    a = _floats(_chua_make(p)[2])
+    grid = np.unique(np.append(ts, 5.0))
+    states, _ = chua_reference(
+        np.array([p["x0"], 0.0, 0.0]), grid, a["alpha"], a["beta"], a["m0"], a["m1"]
+    )
+    return _max_error(xs, states[np.searchsorted(grid, ts)])
+
+
+CHUA = Family(
+    "chua",
+    "Saturation",
+    "Chua's circuit, piecewise-linear diode (t <= 5)",
+    _chua_make,
+    ({"x0": 0.7}, {"x0": 0.2}),
+    5.0,
+    _chua_error,
+    20.0,
+)
+
+
+def _st_make(p):
+    return nj.scenes.super_twisting(c=p["c"], lipschitz=p["L"])
+
+
+def _st_error(p, ts, xs):
+    scene, x0, a = _st_make(p)
+    a = _floats(a)
+    grid = np.unique(np.append(ts, 5.0))
+    states, _, _ = super_twisting_reference(np.asarray(x0), a["k1"], a["k2"], a["c"], grid)
+    return _max_error(xs, states[np.searchsorted(grid, ts)])
+
+
+SUPER_TWISTING = Family(
+    "super_twisting",
+    "Relay, second-order sliding",
+    "Super-twisting controller: finite-time reaching, then second-order sliding",
+    _st_make,
+    ({"c": 1.0, "L": 1.5}, {"c": 3.0, "L": 5.0}),
+    5.0,
+    _st_error,
+    5.0,
+)
+
+
+FAMILIES = {
+    f.name: f
+    for f in (
+        RELAY,
+        SPIRAL,
+        STICK_SLIP,
+        BALL,
+        BLOCK_INTERVAL,
+        BLOCK_CONE,
+        _rectifier_family("rectifier", False),
+        _rectifier_family("diode_bridge", True),
+        CHUA,
+        SUPER_TWISTING,
+    )
+}

@@ -1,0 +1,333 @@
+"""The reliability campaign: does a `successful` result meet its tolerance?
+
+    OPENBLAS_NUM_THREADS=1 python -m benchmarks.reliability           # full (about an hour)
+    OPENBLAS_NUM_THREADS=1 python -m benchmarks.reliability --quick   # minutes
+
+In the spirit of the DETEST and Bari test sets for smooth solvers: scene families with exact
+(or converged event-driven) references and parameter grids, run with every stepper x
+{semismooth Newton, VI} x {the default controller, PI control, the reference package's
+controller options} x rtol from 1e-2 to 1e-8 (atol = rtol / 100).
+
+**The rule**, stated per family before the run: a run either returns a failure code (a
+*stall*: reported, not wrong), or its global error meets tolerance proportionality,
+
+    error <= C_family * rtol^q,   q = p / (p + 1) for a scheme of order p,
+
+(the global error of a scheme of order p under control of its local error per step), and
+its error falls as rtol does: each time rtol falls by 10 the error falls by at least
+10^q / 2 (the expected rate within 2x), unless it is already below a tenth of its bound
+(round-off and the event margin set floors there, far inside tolerance). A successful run
+that breaks either is a *silent wrong answer*.
+
+Writes `benchmarks/results/reliability.{csv,md,png}` and the table of
+`docs/concepts/guarantees.md`.
+"""
+
+import argparse
+import csv
+import os
+import time
+from pathlib import Path
+
+import numpy as np
+
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import jax  # noqa: E402
+
+import nivpjax as nj  # noqa: E402
+
+from .families import FAMILIES  # noqa: E402
+
+
+jax.config.update("jax_enable_x64", True)
+
+RESULTS = Path(__file__).resolve().parent / "results"
+DOCS_PAGE = Path(__file__).resolve().parents[1] / "docs" / "concepts" / "guarantees.md"
+RTOLS = tuple(10.0**-k for k in range(2, 9))
+QUICK_RTOLS = (1e-3, 1e-4, 1e-5, 1e-6)
+MAX_STEPS = 200_000
+
+STEPPERS = {  # name: (class, order of the propagated solution)
+    "BackwardEuler": (nj.BackwardEuler, 1),
+    "Trapezoidal": (nj.Trapezoidal, 2),
+    "Bathe": (nj.Bathe, 2),
+    "EmbeddedBETR": (nj.EmbeddedBETR, 1),
+}
+SOLVERS = {"SSN": nj.SemismoothNewton, "VI": nj.FixedPointVI}
+
+
+def controller(name, rtol, h_max):
+    """The three controllers of the campaign at `rtol` (atol = rtol / 100).
+
+    - `default`: `PIDController` as a user gets it (integral control, event prediction);
+    - `PI`: the Gustafsson PI filter (0.4, 0.3) of the reference's default `use_PI=True`;
+    - `reference`: the reference package's options that the issue names, `h_down=0.5,
+      h_up=1.5, method_order=1, use_PI=False`, as the drop-in translates them.
+    """
+    common = dict(rtol=rtol, atol=rtol / 100, h_max=h_max)
+    if name == "default":
+        return nj.PIDController(**common)
+    if name == "PI":
+        return nj.PIDController(pcoeff=0.4, icoeff=0.3, **common)
+    return nj.PIDController(
+        pcoeff=0.0, icoeff=1.0, factormin=0.5, factormax=1.5, error_order=2, h_min=1e-10, **common
+    )
+
+
+CONTROLS = ("default", "PI", "reference")
+
+
+def q_of(order):
+    return order / (order + 1)
+
+
+def compiled_run(family, stepper, solver, control):
+    """One jitted solve per configuration: `run(x0, args, rtol) -> Solution` (the
+    parameters of the grid are run-time inputs)."""
+    scene, _, _ = family.make(family.grid[0])
+    step = STEPPERS[stepper][0](solver=SOLVERS[solver]())
+
+    def run(x0, args, rtol):
+        return scene.solve(
+            0.0,
+            family.t1,
+            x0,
+            args,
+            stepper=step,
+            controller=controller(control, rtol, family.h_max),
+            max_steps=MAX_STEPS,
+            throw=False,
+        )
+
+    return scene, jax.jit(run)
+
+
+def run_one(family, scene, run, params, rtol):
+    """`dict` of one run: result, error, steps, seconds."""
+    _, x0, args = family.make(params)
+    t0 = time.perf_counter()
+    sol = jax.block_until_ready(run(x0, args, rtol))
+    seconds = time.perf_counter() - t0
+    ok = bool(sol.result == nj.RESULTS.successful)
+    k = int(sol.n_accepted)
+    ts = np.asarray(sol.ts[: k + 1])
+    xs, _ = scene.split(np.asarray(sol.ys[: k + 1]))
+    error = family.error(params, ts, xs) if ok else np.nan
+    return dict(
+        ok=ok,
+        result=int(sol.result._value),
+        error=error,
+        accepted=k,
+        rejected=int(sol.n_rejected),
+        seconds=seconds,
+    )
+
+
+def judge(family, order, rows):
+    """Classify the runs of one (configuration, grid point) across rtol, in place:
+    `verdict` is `pass`, `stall` or `wrong` (with `why`)."""
+    q, C = q_of(order), family.constant(order)
+    for row in rows:
+        bound = C * row["rtol"] ** q
+        row["ratio"] = row["error"] / bound if row["ok"] else np.nan
+        if not row["ok"]:
+            row["verdict"], row["why"] = "stall", "failure code"
+        elif not np.isfinite(row["error"]) or row["error"] > bound:
+            row["verdict"], row["why"] = "wrong", "error above C rtol^q"
+        else:
+            row["verdict"], row["why"] = "pass", ""
+    for coarse, fine in zip(rows, rows[1:]):
+        if not (coarse["ok"] and fine["ok"]) or fine["verdict"] == "wrong":
+            continue
+        falls = fine["error"] <= 2 * 10.0**-q * coarse["error"]
+        inside = fine["error"] <= 0.1 * C * fine["rtol"] ** q
+        if not (falls or inside):
+            fine["verdict"], fine["why"] = "wrong", "error does not fall with rtol"
+    return rows
+
+
+def campaign(families, steppers, solvers, controls, rtols, grid_slice, log=print):
+    rows = []
+    for family in families:
+        for stepper in steppers:
+            order = STEPPERS[stepper][1]
+            for solver in solvers:
+                for control in controls:
+                    t0 = time.perf_counter()
+                    scene, run = compiled_run(family, stepper, solver, control)
+                    for g, params in enumerate(family.grid[grid_slice]):
+                        runs = []
+                        for rtol in rtols:
+                            row = run_one(family, scene, run, params, rtol)
+                            row.update(
+                                family=family.name,
+                                stepper=stepper,
+                                solver=solver,
+                                control=control,
+                                point=g,
+                                rtol=rtol,
+                            )
+                            runs.append(row)
+                        rows += judge(family, order, runs)
+                    cfg = [r for r in rows if r["family"] == family.name]
+                    cfg = [
+                        r
+                        for r in cfg
+                        if (r["stepper"], r["solver"], r["control"]) == (stepper, solver, control)
+                    ]
+                    log(
+                        f"{family.name:15s} {stepper:13s} {solver:3s} {control:9s} "
+                        + " ".join(r["verdict"][0] for r in cfg)
+                        + f"  {time.perf_counter() - t0:6.1f} s"
+                    )
+    return rows
+
+
+# --- Output ------------------------------------------------------------------------------
+
+
+FIELDS = (
+    "family stepper solver control point rtol verdict why error ratio accepted rejected "
+    "result seconds"
+).split()
+
+
+def write_csv(rows, path):
+    with open(path, "w", newline="") as fh:
+        w = csv.DictWriter(fh, FIELDS, extrasaction="ignore")
+        w.writeheader()
+        for r in rows:
+            w.writerow({k: (f"{r[k]:.3e}" if isinstance(r[k], float) else r[k]) for k in FIELDS})
+
+
+def summary(rows, families):
+    """Markdown: per family x stepper, runs passed / stalled / silently wrong, the worst
+    error/bound ratio of a successful run, and the median accepted steps."""
+    lines = [
+        "| family | effect | C | stepper | q | runs | pass | stall | wrong "
+        "| worst error / bound | median steps |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for family in families:
+        for stepper, (_, order) in STEPPERS.items():
+            sel = [r for r in rows if r["family"] == family.name and r["stepper"] == stepper]
+            if not sel:
+                continue
+            count = {v: sum(r["verdict"] == v for r in sel) for v in ("pass", "stall", "wrong")}
+            ratios = [r["ratio"] for r in sel if r["ok"]]
+            worst = f"{max(ratios):.2f}" if ratios else "-"
+            steps = int(np.median([r["accepted"] for r in sel]))
+            lines.append(
+                f"| {family.name} | {family.effect} | {family.constant(order):g} | {stepper} "
+                f"| {q_of(order):.2f} | {len(sel)} | {count['pass']} | {count['stall']} "
+                f"| {count['wrong']} | {worst} | {steps} |"
+            )
+    total = {v: sum(r["verdict"] == v for r in rows) for v in ("pass", "stall", "wrong")}
+    lines.append(
+        f"\n**All:** {len(rows)} runs, {total['pass']} passed, {total['stall']} stalled "
+        f"(failure code), {total['wrong']} silently wrong."
+    )
+    return "\n".join(lines)
+
+
+def wrong_list(rows):
+    bad = [r for r in rows if r["verdict"] == "wrong"]
+    if not bad:
+        return "No silent wrong answer."
+    head = "| family | stepper | solver | control | point | rtol | error | why |"
+    lines = [head, "|---" * 8 + "|"]
+    for r in bad:
+        lines.append(
+            f"| {r['family']} | {r['stepper']} | {r['solver']} | {r['control']} | {r['point']} "
+            f"| {r['rtol']:.0e} | {r['error']:.2e} | {r['why']} |"
+        )
+    return "\n".join(lines)
+
+
+def plot(rows, families, path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    cols = 4
+    nrows = -(-len(families) // cols)
+    fig, axes = plt.subplots(nrows, cols, figsize=(4 * cols, 3.2 * nrows), squeeze=False)
+    for ax, family in zip(axes.flat, families):
+        for stepper, (_, order) in STEPPERS.items():
+            sel = [
+                r
+                for r in rows
+                if r["family"] == family.name
+                and r["stepper"] == stepper
+                and r["solver"] == "SSN"
+                and r["control"] == "default"
+                and r["ok"]
+            ]
+            rt = sorted({r["rtol"] for r in sel})
+            worst = [max(r["error"] for r in sel if r["rtol"] == x) for x in rt]
+            ax.loglog(rt, worst, "o-", ms=3, label=stepper)
+        rt = np.array(sorted({r["rtol"] for r in rows}))
+        for order, style in ((1, ":"), (2, "--")):
+            ax.loglog(rt, family.constant(order) * rt ** q_of(order), "k" + style, lw=0.8)
+        ax.set_title(family.name, fontsize=9)
+        ax.set_xlabel("rtol")
+        ax.invert_xaxis()
+    for ax in list(axes.flat)[len(families) :]:
+        ax.axis("off")
+    axes.flat[0].set_ylabel("worst error over the grid")
+    axes.flat[0].legend(fontsize=7)
+    fig.suptitle(
+        "Error against rtol (semismooth Newton, default controller); "
+        "dotted/dashed: the bounds C rtol^q for q = 1/2, 2/3",
+        fontsize=9,
+    )
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+
+
+def write_docs(table, wrong, header):
+    text = DOCS_PAGE.read_text()
+    start, end = "<!-- reliability-table -->", "<!-- /reliability-table -->"
+    i, j = text.index(start) + len(start), text.index(end)
+    body = f"\n{header}\n\n{table}\n\n{wrong}\n"
+    DOCS_PAGE.write_text(text[:i] + body + text[j:])
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.reliability")
+    parser.add_argument("--quick", action="store_true", help="4 rtols, first grid point")
+    parser.add_argument("--families", nargs="+", choices=list(FAMILIES), default=list(FAMILIES))
+    parser.add_argument("--steppers", nargs="+", choices=list(STEPPERS), default=list(STEPPERS))
+    parser.add_argument("--solvers", nargs="+", choices=list(SOLVERS), default=list(SOLVERS))
+    parser.add_argument("--controls", nargs="+", choices=CONTROLS, default=list(CONTROLS))
+    parser.add_argument("--out", default=None, help="file stem (default: results/reliability)")
+    parser.add_argument("--no-docs", action="store_true", help="do not rewrite the docs page")
+    a = parser.parse_args(argv)
+    families = [FAMILIES[f] for f in a.families]
+    rtols = QUICK_RTOLS if a.quick else RTOLS
+    grid = slice(0, 1) if a.quick else slice(None)
+    t0 = time.perf_counter()
+    rows = campaign(families, a.steppers, a.solvers, a.controls, rtols, grid)
+    minutes = (time.perf_counter() - t0) / 60
+    stem = Path(a.out) if a.out else RESULTS / ("reliability-quick" if a.quick else "reliability")
+    write_csv(rows, stem.with_suffix(".csv"))
+    plot(rows, families, stem.with_suffix(".png"))
+    table, wrong = summary(rows, families), wrong_list(rows)
+    header = (
+        f"Campaign {'(quick) ' if a.quick else ''}of {time.strftime('%Y-%m-%d')}: "
+        f"nivpjax {nj.__version__}, rtols "
+        f"{', '.join(f'{r:.0e}' for r in rtols)}, {minutes:.0f} min on "
+        f"{os.cpu_count()} cores."
+    )
+    stem.with_suffix(".md").write_text(f"{header}\n\n{table}\n\n{wrong}\n")
+    if not (a.no_docs or a.quick or a.out):
+        write_docs(table, wrong, header)
+    print(table)
+    print(wrong)
+
+
+if __name__ == "__main__":
+    main()
