@@ -21,10 +21,6 @@ SLICE = {
     "super_twisting": "BackwardEuler",
 }
 RTOLS = (1e-4, 1e-5)
-# Known, and reported by the campaign: friction reactions applied as proximal maps are
-# integrated at first order in a smooth slip phase, and the second-order estimates do not
-# see it (issue 32). With slip weakening the error then grows past C rtol^q.
-KNOWN = {"stick_slip"}
 
 
 def _judged(name):
@@ -39,15 +35,7 @@ def _judged(name):
     return campaign.judge(family, campaign.STEPPERS[stepper][1], rows)
 
 
-@pytest.mark.parametrize(
-    "name",
-    [
-        pytest.param(n, marks=pytest.mark.xfail(strict=True, reason="issue 32"))
-        if n in KNOWN
-        else n
-        for n in SLICE
-    ],
-)
+@pytest.mark.parametrize("name", list(SLICE))
 def test_campaign_slice(name):
     rows = _judged(name)
     assert all(r["ok"] for r in rows), [r["result"] for r in rows]

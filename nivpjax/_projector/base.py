@@ -212,6 +212,14 @@ class AbstractProjector(eqx.Module):
         Default: all."""
         return np.ones(n, bool)
 
+    def weighed_rows(self, n: int) -> np.ndarray:
+        r"""The rows of a state of size `n` whose reaction is a bounded force that varies
+        smoothly along a phase (a static NumPy mask): Coulomb friction as a proximal map.
+        A stage of the theta family weighs it like the vector field, at both ends (see
+        `Model.solve_stage`), instead of applying it whole at the stage's end. Default:
+        none (normal cones: impulses and holding forces stay at the stage's end)."""
+        return np.zeros(n, bool)
+
     @property
     def has_kinks(self) -> bool:
         """Whether `early_kinks` can report a crossing (static: a model without kinks

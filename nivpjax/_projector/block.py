@@ -170,6 +170,14 @@ class BlockProjector(AbstractProjector):
             mask[idx] = projector.acts_on(idx.size)
         return mask
 
+    def weighed_rows(self, n: int) -> np.ndarray:
+        """The rows of the blocks whose projectors weigh their reactions."""
+        mask = np.zeros(n, bool)
+        for indices, projector in self.blocks:
+            idx = np.asarray(indices)
+            mask[idx] = projector.weighed_rows(idx.size)
+        return mask
+
     @property
     def has_kinks(self) -> bool:
         return any(projector.has_kinks for _, projector in self.blocks)

@@ -2,6 +2,7 @@
 
 import equinox as eqx
 import jax.numpy as jnp
+import numpy as np
 
 from .ball import project_ball
 from .base import AbstractProjector, Bound, ProjectionContext, resolve, switch_delay
@@ -39,6 +40,11 @@ class CoulombFriction(AbstractProjector):
 
     bound: Bound
     isotropic: bool = eqx.field(static=True, default=False)
+
+    def weighed_rows(self, n: int) -> np.ndarray:
+        """Every row: the friction force is bounded and, along a slip or a stick, a smooth
+        function of time that a second-order stage must weigh at both ends."""
+        return np.ones(n, bool)
 
     def violation(self, ctx: ProjectionContext):
         r"""Two events inside a step, each measured in velocity units so the step is

@@ -111,6 +111,9 @@ class EventLocated(AbstractProjector):
     def acts_on(self, n: int) -> np.ndarray:
         return self.projector.acts_on(n)
 
+    def weighed_rows(self, n: int) -> np.ndarray:
+        return self.projector.weighed_rows(n)
+
     def _value(self, ctx: ProjectionContext, t, y):
         # The switching functions at (t, y), at least 1-D, in the state's dtype.
         return jnp.atleast_1d(self.surface(t, y, ctx.args)).astype(y.dtype)
