@@ -207,6 +207,28 @@ def test_newton_reports_failure_with_small_budget():
     assert np.all(np.isfinite(sol.value))
 
 
+@pytest.mark.parametrize("name", SOLVERS)
+def test_tiny_steps_do_not_freeze_the_state(name):
+    """Steps whose whole update lies below the solver's tolerance (h |y'| = 1e-10 to 1e-8
+    against rtol |y| = 1e-8): a solve stopping at its initial guess (the start of the step)
+    returns the step's start, whose rates and so its error estimate agree: the controller
+    accepts and grows the step. Measured without the rule (semismooth Newton): 1.1e-8 of
+    the 1e-6 travelled lost, `successful`. The VI method's copy of the rule is not needed
+    here: stopping at once, it returns its projection step, which solves these stages."""
+    solver = nj.SemismoothNewton() if name == "newton" else nj.FixedPointVI()
+    sol = nj.solve(
+        lambda t, y, args: jnp.ones_like(y),
+        0.0,
+        1e-6,
+        jnp.array([1.0]),
+        None,
+        stepper=nj.BackwardEuler(solver),
+        h0=1e-10,
+    )
+    assert float(sol.hs[1]) == 1e-10  # the first step is below the tolerance
+    np.testing.assert_allclose(sol.y_final[0] - 1.0, 1e-6, rtol=1e-8)
+
+
 # --- Implicit-function gradients -------------------------------------------------------------
 def _fd(f, x, eps=1e-6):
     return (f(x + eps) - f(x - eps)) / (2 * eps)
