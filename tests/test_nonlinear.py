@@ -192,6 +192,27 @@ def test_newton_superlinear():
     assert r[-1] < 1e-12
 
 
+@pytest.mark.parametrize("y0", [1.5, 1.391745200270735 + 1e-6])
+def test_newton_line_search_after_the_watchdog(y0):
+    """G(y) = arctan(y), where full Newton steps diverge from |y| > 1.3917 (Newton's
+    2-cycle, y -> -y): the watchdog's full steps let the residual grow (fast from 1.5, by
+    about 1e-6 a step just outside the cycle), and from then on the Armijo line search
+    decreases the merit at every iteration until it converges."""
+    solver = _ARCTAN_SOLVER
+    sol = _ARCTAN(jnp.array([y0]))
+    assert sol.result == nj.RESULTS.successful
+    assert abs(float(sol.value[0])) < 1e-12
+    r = np.asarray(sol.history[: int(sol.iterations) + 1])
+    watchdog = solver.full_steps
+    assert np.all(np.diff(r[: watchdog + 1]) > 0), r  # the full steps: the residual grows
+    merit = 0.5 * r[watchdog:] ** 2
+    assert np.all(merit[1:] < merit[:-1]), r
+
+
+_ARCTAN_SOLVER = nj.SemismoothNewton(rtol=1e-12, atol=1e-12)
+_ARCTAN = jax.jit(lambda y0: _ARCTAN_SOLVER.solve(jnp.arctan, lambda z, y, rho: z, 1.0, y0))
+
+
 def test_vi_reports_failure_with_small_budget():
     solver = nj.FixedPointVI(rtol=1e-13, atol=1e-13, max_steps=3)
     sol = soc_step(solver, jnp.array([-1.0, 2.0, 0.0]), 0.3)
