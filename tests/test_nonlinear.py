@@ -163,6 +163,31 @@ def test_soc_step_sticking(name):
     np.testing.assert_allclose(sol.value, [0.0, 0.0, 0.0, 1.0, -0.2, -0.1], atol=1e-10)
 
 
+_BOX_AND_ORTHANT = _ctx_projector(
+    nj.BlockProjector([([1], nj.Box(-1.0, 1.0)), ([2], nj.NonNegative())])
+)
+
+
+@jax.jit
+def _one_newton_step(A, b):
+    residual = lambda y: A @ y + 0.1 * y**3 - b  # noqa: E731
+    return nj.SemismoothNewton(max_steps=1).solve(residual, _BOX_AND_ORTHANT, 1.0, jnp.zeros(3))
+
+
+def test_returned_multipliers_lie_exactly_in_their_sets():
+    """The returned value's constrained components are the projected point, not the
+    iterate: bit-exactly in their sets (a relay's |w| <= 1, a normal force >= 0) even
+    after a single Newton step, unconverged (measured: the iterate lies outside in a
+    tenth of these stages). (The ball's and the cone's boundary points are computed in
+    rounded arithmetic: an ulp or two outside in a tenth of the cases.)"""
+    rng = np.random.default_rng(0)
+    for _ in range(40):
+        A, b = rng.normal(size=(3, 3)) + 3 * np.eye(3), 3 * rng.normal(size=3)
+        sol = _one_newton_step(A, b)
+        assert sol.result != nj.RESULTS.successful
+        assert abs(float(sol.value[1])) <= 1.0 and float(sol.value[2]) >= 0.0, sol.value
+
+
 # --- Convergence behaviour -------------------------------------------------------------------
 def test_newton_superlinear():
     """Residual history of semismooth Newton on a nonlinear step with an active friction cone:
