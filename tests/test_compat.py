@@ -1,6 +1,9 @@
 """The `solve_ivp_ns` drop-in: the reference's worked examples against exact solutions (and
 against the reference itself when it is installed)."""
 
+import importlib
+import inspect
+
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -209,3 +212,90 @@ def test_agrees_with_reference_relay():
     assert abs(reach(tr, yr) - t_reach) < 0.05
     assert abs(reach(tn, yn) - t_reach) < 0.05
     np.testing.assert_allclose(yn[-1], yr[-1], atol=1e-6)
+
+
+class _Captured(Exception):
+    pass
+
+
+def _handed_to_solve(monkeypatch, **options):
+    """The keyword arguments the drop-in passes to `nivpjax.solve` for these options."""
+    module = importlib.import_module("nivpjax.compat.solve_ivp_ns")
+    seen = {}
+
+    def capture(*args, **kwargs):
+        seen.update(kwargs)
+        raise _Captured
+
+    monkeypatch.setattr(module, "solve", capture)
+    with pytest.raises(_Captured):
+        solve_ivp_ns(lambda t, y: -y, (0.0, 1.0), np.array([1.0]), **options)
+    return seen
+
+
+# Defaults that differ from the reference's (listed in the drop-in's docstring): option ->
+# (ours, the reference's).
+DEFAULTS_THAT_DIFFER = {
+    "h_up": (10.0, 2.0),
+    "h_down": (0.2, 0.6),
+    "max_backtracks": (30, 15),
+    "rho0": (1.0, 0.9),
+}
+
+
+def test_defaults_are_the_reference_ones(monkeypatch):
+    """Option by option, what an omitted option means in the drop-in and in the reference
+    (read from the reference's own signatures and objects, not written down twice)."""
+    ref = pytest.importorskip("solve_nivp")
+    # The entry point's own arguments: same names, order and defaults.
+    ours = list(inspect.signature(solve_ivp_ns).parameters.values())
+    theirs = list(inspect.signature(ref.solve_ivp_ns).parameters.values())
+    for mine, other in zip(ours, theirs):
+        assert (mine.name, mine.kind, mine.default) == (other.name, other.kind, other.default)
+    assert all(p.kind == p.KEYWORD_ONLY for p in ours[len(theirs) :])  # ours: extras only
+    # The reference's objects as its solve_ivp_ns builds them from omitted options.
+    identity = ref.IdentityProjection()
+    ref_vi = ref.ImplicitEquationSolver(method="VI", proj=identity, component_slices=[slice(0, 1)])
+    ref_newton = ref.ImplicitEquationSolver(method="semismooth_newton", proj=identity)
+    composite = ref.CompositeMethod(solver=ref_vi)
+    ref_ctrl = ref.ODESystem(lambda t, y: -y, [1.0], composite, adaptive=True).adaptive_stepper
+    k = ref_ctrl.p + 1  # the reference's error order
+    assert ref_ctrl.mode == "classic" and ref_ctrl.use_PI
+
+    default = _handed_to_solve(monkeypatch)
+    ctrl, stepper, vi = default["controller"], default["stepper"], default["stepper"].solver
+    newton = _handed_to_solve(monkeypatch, solver="semismooth_newton")["stepper"].solver
+    theta = _handed_to_solve(monkeypatch, method="theta")["stepper"]
+    pairs = {
+        # adaptive_opts
+        "h_min": (ctrl.h_min, ref_ctrl.h_min),
+        "h_max": (ctrl.h_max, ref_ctrl.h_max),
+        "h_up": (ctrl.factormax, ref_ctrl.h_up),
+        "h_down": (ctrl.factormin, ref_ctrl.h_down),
+        "safety": (ctrl.safety, ref_ctrl.safety),
+        # use_PI: the exponents of the current and the previous error. The reference's
+        # classic mode raises the previous error to -0.4/k; ours (and the reference's ratio
+        # mode) to +0.4/k, Soderlind's PI.3040: magnitudes compared.
+        "use_PI current": ((ctrl.pcoeff + ctrl.icoeff) / k, ref_ctrl._alpha_PI),
+        "use_PI previous": (ctrl.pcoeff / k, ref_ctrl._beta_PI),
+        "method_order": (stepper.error_order, k),
+        # solver_opts
+        "tol": (vi.rtol, ref_vi.tol),
+        "tol (atol)": (vi.atol, ref_vi.tol),
+        "max_iter": (vi.max_steps, ref_vi.max_iter),
+        "rho0": (vi.alpha0, ref_vi.rho0),
+        "L": (vi.nu, ref_vi.L),
+        "newton tol": (newton.rtol, ref_newton.tol),
+        "newton max_iter": (newton.max_steps, ref_newton.max_iter),
+        "ls_c1": (newton.sigma, ref_newton.ls_c1),
+        "ls_beta": (newton.beta, ref_newton.ls_beta),
+        "max_backtracks": (newton.max_backtracks, ref_newton.max_backtracks),
+        # integrator_opts (the reference's composite scheme has its stage at h/2)
+        "gamma": (stepper.gamma, 0.5),
+        "theta": (theta.theta, ref.ThetaMethod(solver=ref_vi).theta),
+    }
+    assert isinstance(stepper, nj.Bathe) and isinstance(vi, nj.FixedPointVI)
+    assert default["h0"] == ref_ctrl.h == 1e-2
+    for name, (mine, other) in pairs.items():
+        expected = DEFAULTS_THAT_DIFFER.get(name, (other, other))
+        assert (float(mine), float(other)) == pytest.approx(expected, rel=1e-12), name

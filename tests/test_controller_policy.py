@@ -1,4 +1,5 @@
-"""PolicyController: the PID-equivalent policy reproduces PID; jit, vmap and grad."""
+"""PIDController against diffrax's; PolicyController: the PID-equivalent policy reproduces
+PID; jit, vmap and grad."""
 
 import equinox as eqx
 import jax
@@ -29,6 +30,48 @@ def _ball_jit(controller, args, t1):
 
 def _args(e=0.7):
     return {"e": jnp.asarray(e), "g": jnp.asarray(9.81)}
+
+
+def test_pid_factors_match_diffrax_with_derivative_gain():
+    # The same recorded error sequence through both controllers, with all three gains
+    # nonzero: every step-size factor agrees with diffrax's PIDController. The sequence
+    # keeps every step accepted with a factor inside (1, factormax), where the two agree by
+    # design (diffrax never shrinks an accepted step; ours may, and does not grow right
+    # after a rejection).
+    import diffrax
+
+    gains = dict(pcoeff=0.3, icoeff=0.4, dcoeff=0.2, factormax=100.0)
+    ours = nv.PIDController(rtol=1e-3, atol=1.0, event_prediction=False, **gains)
+    theirs = diffrax.PIDController(rtol=1e-3, atol=1.0, **gains)
+    order = 3
+    zero = jnp.zeros(1)  # y = 0: the scaled error is the error itself (atol = 1)
+    stats = nv.StepStats(jnp.array(1), jnp.array(0.0), nv.RESULTS.successful)
+    state_ours = (jnp.array(1.0), jnp.array(1.0), jnp.array(False))
+    state_theirs = (jnp.array(1.0), jnp.array(1.0), jnp.array(False))
+    adapt_ours = jax.jit(lambda info, state: ours.adapt(info, state))
+    adapt_theirs = jax.jit(
+        lambda e, state: theirs.adapt_step_size(0.0, 1.0, zero, zero, None, e, order, state)
+    )
+    for error in [0.5, 0.05, 0.02, 1e-3, 8e-4, 1e-4, 6e-5, 1e-6]:
+        y_error = jnp.array([error])
+        info = nv.StepInfo(
+            t0=jnp.array(0.0),
+            h=jnp.array(1.0),
+            t1=jnp.array(10.0),
+            y0=zero,
+            y1=zero,
+            y_error=y_error,
+            error_order=order,
+            stats=stats,
+            error_mask=jnp.ones(1, bool),
+            violation=jnp.array(0.0),
+            next_event=jnp.array(jnp.inf),
+        )
+        accept, factor, state_ours = adapt_ours(info, state_ours)
+        keep, t0, t1, _, state_theirs, _ = adapt_theirs(y_error, state_theirs)
+        assert bool(accept) and bool(keep)
+        assert 1.0 < float(factor) < 100.0, (error, factor)
+        np.testing.assert_allclose(factor, t1 - t0, rtol=1e-13, err_msg=str(error))
 
 
 def test_integral_policy_reproduces_pid():

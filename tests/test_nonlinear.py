@@ -163,6 +163,31 @@ def test_soc_step_sticking(name):
     np.testing.assert_allclose(sol.value, [0.0, 0.0, 0.0, 1.0, -0.2, -0.1], atol=1e-10)
 
 
+_BOX_AND_ORTHANT = _ctx_projector(
+    nj.BlockProjector([([1], nj.Box(-1.0, 1.0)), ([2], nj.NonNegative())])
+)
+
+
+@jax.jit
+def _one_newton_step(A, b):
+    residual = lambda y: A @ y + 0.1 * y**3 - b  # noqa: E731
+    return nj.SemismoothNewton(max_steps=1).solve(residual, _BOX_AND_ORTHANT, 1.0, jnp.zeros(3))
+
+
+def test_returned_multipliers_lie_exactly_in_their_sets():
+    """The returned value's constrained components are the projected point, not the
+    iterate: bit-exactly in their sets (a relay's |w| <= 1, a normal force >= 0) even
+    after a single Newton step, unconverged (measured: the iterate lies outside in a
+    tenth of these stages). (The ball's and the cone's boundary points are computed in
+    rounded arithmetic: an ulp or two outside in a tenth of the cases.)"""
+    rng = np.random.default_rng(0)
+    for _ in range(40):
+        A, b = rng.normal(size=(3, 3)) + 3 * np.eye(3), 3 * rng.normal(size=3)
+        sol = _one_newton_step(A, b)
+        assert sol.result != nj.RESULTS.successful
+        assert abs(float(sol.value[1])) <= 1.0 and float(sol.value[2]) >= 0.0, sol.value
+
+
 # --- Convergence behaviour -------------------------------------------------------------------
 def test_newton_superlinear():
     """Residual history of semismooth Newton on a nonlinear step with an active friction cone:
@@ -192,6 +217,27 @@ def test_newton_superlinear():
     assert r[-1] < 1e-12
 
 
+@pytest.mark.parametrize("y0", [1.5, 1.391745200270735 + 1e-6])
+def test_newton_line_search_after_the_watchdog(y0):
+    """G(y) = arctan(y), where full Newton steps diverge from |y| > 1.3917 (Newton's
+    2-cycle, y -> -y): the watchdog's full steps let the residual grow (fast from 1.5, by
+    about 1e-6 a step just outside the cycle), and from then on the Armijo line search
+    decreases the merit at every iteration until it converges."""
+    solver = _ARCTAN_SOLVER
+    sol = _ARCTAN(jnp.array([y0]))
+    assert sol.result == nj.RESULTS.successful
+    assert abs(float(sol.value[0])) < 1e-12
+    r = np.asarray(sol.history[: int(sol.iterations) + 1])
+    watchdog = solver.full_steps
+    assert np.all(np.diff(r[: watchdog + 1]) > 0), r  # the full steps: the residual grows
+    merit = 0.5 * r[watchdog:] ** 2
+    assert np.all(merit[1:] < merit[:-1]), r
+
+
+_ARCTAN_SOLVER = nj.SemismoothNewton(rtol=1e-12, atol=1e-12)
+_ARCTAN = jax.jit(lambda y0: _ARCTAN_SOLVER.solve(jnp.arctan, lambda z, y, rho: z, 1.0, y0))
+
+
 def test_vi_reports_failure_with_small_budget():
     solver = nj.FixedPointVI(rtol=1e-13, atol=1e-13, max_steps=3)
     sol = soc_step(solver, jnp.array([-1.0, 2.0, 0.0]), 0.3)
@@ -205,6 +251,28 @@ def test_newton_reports_failure_with_small_budget():
     sol = soc_step(solver, jnp.array([-1.0, 2.0, 0.0]), 0.3)
     assert sol.result != nj.RESULTS.successful
     assert np.all(np.isfinite(sol.value))
+
+
+@pytest.mark.parametrize("name", SOLVERS)
+def test_tiny_steps_do_not_freeze_the_state(name):
+    """Steps whose whole update lies below the solver's tolerance (h |y'| = 1e-10 to 1e-8
+    against rtol |y| = 1e-8): a solve stopping at its initial guess (the start of the step)
+    returns the step's start, whose rates and so its error estimate agree: the controller
+    accepts and grows the step. Measured without the rule (semismooth Newton): 1.1e-8 of
+    the 1e-6 travelled lost, `successful`. The VI method's copy of the rule is not needed
+    here: stopping at once, it returns its projection step, which solves these stages."""
+    solver = nj.SemismoothNewton() if name == "newton" else nj.FixedPointVI()
+    sol = nj.solve(
+        lambda t, y, args: jnp.ones_like(y),
+        0.0,
+        1e-6,
+        jnp.array([1.0]),
+        None,
+        stepper=nj.BackwardEuler(solver),
+        h0=1e-10,
+    )
+    assert float(sol.hs[1]) == 1e-10  # the first step is below the tolerance
+    np.testing.assert_allclose(sol.y_final[0] - 1.0, 1e-6, rtol=1e-8)
 
 
 # --- Implicit-function gradients -------------------------------------------------------------

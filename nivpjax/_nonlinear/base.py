@@ -28,7 +28,9 @@ class NonlinearSolution(eqx.Module):
     - `value`: the solution: the final iterate $y$, with the components the projector
       moves (or where $y$ itself lies outside the set) replaced by those of
       $P(y - \\rho R(y))$, so constrained components lie exactly in their sets, converged
-      or not (differentiable through the implicit function theorem).
+      or not (bit-exactly for boxes, sign sets and orthants; the ball's and the cone's
+      boundary points are computed in rounded arithmetic, to an ulp or two), differentiable
+      through the implicit function theorem.
     - `iterations`: number of outer iterations taken.
     - `residual_norm`: $\\|G(y)\\|_\\infty$ at the returned value, with
       $G(y) = y - P(y - \\rho R(y))$ at the problem's own $\\rho$.
@@ -155,7 +157,8 @@ class AbstractNonlinearSolver(eqx.Module):
 
         y, (iterations, history) = lax.custom_root(G, y0, _solve, _tangent_solve, has_aux=True)
         # On components the projector moves, return the projected point P(y - rho R(y)):
-        # it lies exactly in the set (the iterate only to tolerance), within |G(y)| of y,
+        # it lies in the set (exactly, up to the projection's rounding on curved
+        # boundaries; the iterate only to tolerance), within |G(y)| of y,
         # with the same implicit derivative (G vanishes along the solution). So do
         # components where the iterate itself lies outside the set (P(y) != y), which
         # happens when the solve stopped unconverged with z inside the set. Free

@@ -94,14 +94,11 @@ class Bathe(AbstractStepper):
             # the next inputs are dropped).
             y_mid = sol.value
             impulsive = model.impulsive(stage.t_end, stage.h_eff, stage.y_prev, y_mid, args)
-            # After a switch in the first stage, y0 moves (in derivatives only) by the
-            # switch's saltation term, as y_mid did: otherwise the backward difference
-            # would weigh that term 1/(gamma (2 - gamma)) times.
-            y0_post = y0 + model.switch_jump(t0, y0, t_mid, y_mid, args)
-            y_base = -(c1 * y0_post + c2 * y_mid) / c3
+            y_base = -(c1 * y0 + c2 * y_mid) / c3
             # After an impulse or a change of face in the first stage the three points do
             # not lie on one smooth curve: restart the second stage as backward Euler from
-            # y_mid.
+            # y_mid. (A switch whose saltation term the first stage carries is such a change
+            # of face, so y0 never needs that term here.)
             switched = model.switched(stage.t_end, stage.h_eff, stage.y_prev, y_mid, args)
             restart = impulsive | switched
             y_base = jnp.where(restart, y_mid, y_base)

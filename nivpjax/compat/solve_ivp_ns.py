@@ -243,6 +243,11 @@ def solve_ivp_ns(
       bounce too; restitution uses the pre-impact velocity as in the reference.
     - `'coulomb'` acts only on `constraint_indices`; `'soccp'` takes `blocks` (normal index
       first, then tangential ones) and `mu`, with the impulses as algebraic unknowns.
+    - Defaults of omitted options that differ (tested against the reference's): `h_up`
+      10 and `h_down` 0.2 (diffrax's factor bounds; the reference's are 2 and 0.6),
+      `max_backtracks` 30 (15), `rho0` 1 (0.9). `use_PI` is Söderlind's PI.3040, the
+      previous error raised to $+0.4/k$ as in the reference's ratio mode (its classic mode
+      uses $-0.4/k$).
     - Failures raise [`nivpjax.SolveError`][] (`throw=False` returns the partial solution).
     - `h[i]` is the step that produced `y[i]` (`h[0] = h0`); `fk` is a float array of shape
       `(m - 1, n)`, the stage residual (constraint reaction per unit time) after each step;
