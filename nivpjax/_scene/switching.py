@@ -33,13 +33,17 @@ class _DiodeSurface(eqx.Module):
 
 
 class Relay(AbstractEffect):
-    r"""A relay / sign nonlinearity $w \in \operatorname{sign}(s(t, x))$ as `size`
+    r"""A relay / sign nonlinearity $w \in \operatorname{sign}(s(t, x))$ as `n`
     multipliers $w \in [-1, 1]$ (Filippov's convexification: in sliding mode $w$ takes the
     equivalent-control value). The dynamics read it as `multipliers[name]`. Crossings of
     $s = 0$ inside a step are located by the step-size controller
     ([`nivpjax.EventLocated`][]).
 
-    - `switch(t, x, args) -> (size,)`: the switching function $s$.
+    **Arguments:**
+
+    - `name`: the key of its multipliers.
+    - `switch`: `switch(t, x, args) -> (n,)`, the switching function $s$.
+    - `n`: the number of relays (default 1).
     """
 
     name: str = eqx.field(static=True)
@@ -113,10 +117,21 @@ class Diode(AbstractEffect):
 
 
 class SetValued(AbstractEffect):
-    r"""A user-defined multiplier effect: `size` multipliers $\lambda \in K$ for any
-    projector $K$, with algebraic rows `constraint(t, x, lam, args)` (the stage solves
-    $\lambda = P_K(\lambda + \rho\,\text{constraint})$). `equation=True` scales the rows as
-    algebraic equations."""
+    r"""A user-defined multiplier effect: `n` multipliers $\lambda \in K$ for any
+    projector $K$, with algebraic rows `constraint_fn(t, x, lam, args)` (the stage solves
+    $\lambda = P_K(\lambda + \rho\,\text{constraint})$). `is_equation=True` scales the rows
+    as algebraic equations.
+
+    **Arguments:**
+
+    - `name`: the key of its multipliers.
+    - `projector`: the set $K$, a [`nivpjax.AbstractProjector`][] on the `n` multipliers.
+    - `constraint_fn`: `constraint_fn(t, x, lam, args) -> (n,)`, the algebraic rows.
+    - `n`: the number of multipliers (default 1).
+    - `is_equation`: scale the rows as algebraic equations with $O(1)$ sensitivity to
+      $\lambda$ ($\rho = \tau$) rather than multipliers entering the state with weight $h$
+      ($\rho = \tau / h$; default).
+    """
 
     name: str = eqx.field(static=True)
     projector: AbstractProjector
