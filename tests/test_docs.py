@@ -118,3 +118,23 @@ def test_snippets_run(page, tmp_path, monkeypatch, quick_compiles):
         snippets.run_page(page)
     finally:
         plt.close("all")
+
+
+def test_readme_and_home_count_the_scenes():
+    """The README and the docs home say how many classic systems `nivpjax.scenes` builds
+    (the README said eight, the home nine): count the constructors that return a scene."""
+    import inspect
+
+    import nivpjax as nj
+
+    constructors = {
+        name: fn
+        for name, fn in inspect.getmembers(nj.scenes, inspect.isfunction)
+        if not name.startswith("_") and fn.__module__ == nj.scenes.__name__
+    }
+    built = [name for name, fn in constructors.items() if isinstance(fn()[0], nj.Scene)]
+    words = "zero one two three four five six seven eight nine ten eleven twelve".split()
+    said = f"{words[len(built)]} classic systems"
+    root = snippets.DOCS.parent
+    for page in (root / "README.md", snippets.DOCS / "index.md"):
+        assert said in page.read_text(), f"{page.name} does not say {said!r} ({built})"
