@@ -13,12 +13,18 @@ where the content allows, and avoid a new program per page.
 """
 
 import importlib.util
+import inspect
 import pathlib
+import re
+import shlex
+import subprocess
+import sys
 
 import jax
 import matplotlib
 import pytest
 
+import nivpjax as nj
 from nivpjax._batched import _batched_jit
 from nivpjax._solve import _solve_jit
 
@@ -123,10 +129,6 @@ def test_snippets_run(page, tmp_path, monkeypatch, quick_compiles):
 def test_readme_and_home_count_the_scenes():
     """The README and the docs home say how many classic systems `nivpjax.scenes` builds
     (the README said eight, the home nine): count the constructors that return a scene."""
-    import inspect
-
-    import nivpjax as nj
-
     constructors = {
         name: fn
         for name, fn in inspect.getmembers(nj.scenes, inspect.isfunction)
@@ -138,3 +140,23 @@ def test_readme_and_home_count_the_scenes():
     root = snippets.DOCS.parent
     for page in (root / "README.md", snippets.DOCS / "index.md"):
         assert said in page.read_text(), f"{page.name} does not say {said!r} ({built})"
+
+
+def test_readme_test_command_prints_the_summary_line(tmp_path):
+    """The README's test command ends with pytest's summary line (`N passed in ...`), also
+    with a `-q` of the user's: a `-q` in the project's addopts made that `-qq`, which prints
+    dots only. Run on a one-test file with the project's configuration."""
+
+    root = snippets.DOCS.parent
+    readme = (root / "README.md").read_text()
+    command = re.search(r"Run the tests.*?```bash\n(.*?)\n```", readme, re.S).group(1)
+    args = shlex.split(command)
+    assert args[:3] == ["python", "-m", "pytest"] and args[-1] == "tests", command
+    (tmp_path / "test_one.py").write_text("def test_one():\n    pass\n")
+    config = ["-c", str(root / "pyproject.toml"), "--rootdir", str(tmp_path)]
+    config += ["-p", "no:cacheprovider"]
+    # With a `-q` of the user's (without it pytest is more verbose still).
+    run = [sys.executable, *args[1:-1], *config, "-q", str(tmp_path / "test_one.py")]
+    out = subprocess.run(run, capture_output=True, text=True, timeout=300, cwd=tmp_path)
+    last = out.stdout.strip().splitlines()[-1]
+    assert re.search(r"\b1 passed\b", last), (out.stdout, out.stderr)
