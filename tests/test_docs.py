@@ -33,10 +33,16 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
 
-_SNIPPETS = pathlib.Path(__file__).resolve().parents[1] / "docs" / "_scripts" / "snippets.py"
-_SPEC = importlib.util.spec_from_file_location("docs_snippets", _SNIPPETS)
-snippets = importlib.util.module_from_spec(_SPEC)
-_SPEC.loader.exec_module(snippets)
+def _script(name):
+    path = pathlib.Path(__file__).resolve().parents[1] / "docs" / "_scripts" / f"{name}.py"
+    spec = importlib.util.spec_from_file_location(f"docs_{name}", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+snippets = _script("snippets")
+check_site = _script("check_site")
 
 # The only snippets that are not run (marked `<!-- snippet: skip: why -->` in the page), and
 # why. Every other snippet runs; a new skip must be added here, with its reason.
@@ -160,3 +166,37 @@ def test_readme_test_command_prints_the_summary_line(tmp_path):
     out = subprocess.run(run, capture_output=True, text=True, timeout=300, cwd=tmp_path)
     last = out.stdout.strip().splitlines()[-1]
     assert re.search(r"\b1 passed\b", last), (out.stdout, out.stderr)
+
+
+def _headings(page):
+    """The Markdown headings of a page, outside code blocks."""
+    fenced, out = False, []
+    for line in page.read_text().splitlines():
+        if line.lstrip().startswith(("```", "~~~")):
+            fenced = not fenced
+        elif not fenced and re.match(r"#{1,6} ", line):
+            out.append(line)
+    return out
+
+
+def test_headings_and_nav_titles_have_no_tex():
+    """A heading with maths shows as raw TeX in the tables of contents (`The scaling
+    \\(\\rho\\)`): headings and the nav of mkdocs.yml write symbols in Unicode instead."""
+    root = snippets.DOCS.parent
+    pages = [p for p in snippets.DOCS.rglob("*.md") if "_scripts" not in p.parts]
+    pages += sorted((root / "benchmarks" / "results").glob("*.md"))
+    bad = [(p.name, h) for p in pages for h in _headings(p) if check_site.RAW_TEX.search(h)]
+    nav = (root / "mkdocs.yml").read_text().split("\nnav:", 1)[1]
+    bad += [("mkdocs.yml", line) for line in nav.splitlines() if check_site.RAW_TEX.search(line)]
+    assert not bad
+
+
+def test_site_check_finds_raw_tex_in_titles(tmp_path):
+    toc = '<a href="#s" class="md-nav__link"><span>The scaling \\(\\rho\\)</span></a>'
+    (tmp_path / "bad.html").write_text(f"<title>Formulation</title><nav>{toc}</nav>")
+    (tmp_path / "good.html").write_text(
+        '<title>Formulation</title><a class="md-nav__link">The scaling ρ</a>'
+        '<h2>The scaling <span class="arithmatex">\\(\\rho\\)</span></h2>'
+    )
+    problems = check_site.check_titles(tmp_path)
+    assert len(problems) == 1 and problems[0].startswith("bad.html: raw TeX"), problems
