@@ -122,7 +122,7 @@ def main():
     print(
         f"after t_inf: max |q| = {np.max(np.abs(ys[after, 0]), initial=0):.1e}, "
         f"max |v| = {np.max(np.abs(ys[after, 1]), initial=0):.1e}; run ended at "
-        f"t = {float(z.t_final):.4f}: {nj.RESULTS[z.result] or 'successful'}"
+        f"t = {float(z.t_final):.4f}: {nj.RESULTS[z.result]}"
     )
     if z.result != nj.RESULTS.successful:
         print(

@@ -1104,3 +1104,36 @@ def test_compat_max_steps_reached():
     np.testing.assert_allclose(t, [0.0, 0.1, 0.2, 0.3], atol=1e-12)
     with pytest.raises(nj.SolveError, match=r"failed at t = 0\.3 .*maximum number of time"):
         solve_ivp_ns(lambda t, y: -y, (0.0, 1.0), Y0, **kwargs)
+
+
+# --------------------------------------------------------------------------------------------
+# Effects: a relay's bounds
+# --------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "kwargs, error, match",
+    [
+        (dict(lower=1.0, upper=-1.0), ValueError, "`lower` must be below `upper`"),
+        (dict(lower=0.5, upper=0.5), ValueError, "`lower` must be below `upper`"),
+        (dict(n=2, lower=[0.0, 1.0], upper=1.0), ValueError, r"components \[1\]"),
+        (dict(n=2, lower=[-1.0, -1.0, -1.0]), ValueError, r"shape \(2,\).*got shape \(3,\)"),
+        (dict(lower=np.zeros((1, 1))), ValueError, "must be a scalar or have shape"),
+        (dict(upper=np.inf), ValueError, "`upper` must be finite"),
+        (dict(lower="a"), TypeError, "`lower` must be a number"),
+        (dict(upper=lambda t, y, a: 1.0), TypeError, "`upper` must be a number"),
+        (dict(lower=1j), TypeError, "`lower` must be real"),
+    ],
+)
+def test_relay_rejects_bad_bounds(kwargs, error, match):
+    with pytest.raises(error, match=match):
+        nj.Relay("w", lambda t, x, a: x[:1], **kwargs)
+
+
+def test_relay_accepts_bounds_per_component_and_traced_bounds():
+    relay = nj.Relay("w", lambda t, x, a: x[:2], n=2, lower=np.array([-1.0, 0.0]), upper=2.0)
+    assert relay.size == 2
+    # Traced bounds (a sweep over them) are the caller's to check: no error at trace time.
+    jax.vmap(lambda b: nj.Relay("w", lambda t, x, a: x[:1], lower=-b, upper=b).upper)(
+        jnp.array([0.5, 1.0])
+    )

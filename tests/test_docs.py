@@ -13,12 +13,18 @@ where the content allows, and avoid a new program per page.
 """
 
 import importlib.util
+import inspect
 import pathlib
+import re
+import shlex
+import subprocess
+import sys
 
 import jax
 import matplotlib
 import pytest
 
+import nivpjax as nj
 from nivpjax._batched import _batched_jit
 from nivpjax._solve import _solve_jit
 
@@ -27,10 +33,16 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
 
-_SNIPPETS = pathlib.Path(__file__).resolve().parents[1] / "docs" / "_scripts" / "snippets.py"
-_SPEC = importlib.util.spec_from_file_location("docs_snippets", _SNIPPETS)
-snippets = importlib.util.module_from_spec(_SPEC)
-_SPEC.loader.exec_module(snippets)
+def _script(name):
+    path = pathlib.Path(__file__).resolve().parents[1] / "docs" / "_scripts" / f"{name}.py"
+    spec = importlib.util.spec_from_file_location(f"docs_{name}", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+snippets = _script("snippets")
+check_site = _script("check_site")
 
 # The only snippets that are not run (marked `<!-- snippet: skip: why -->` in the page), and
 # why. Every other snippet runs; a new skip must be added here, with its reason.
@@ -118,3 +130,73 @@ def test_snippets_run(page, tmp_path, monkeypatch, quick_compiles):
         snippets.run_page(page)
     finally:
         plt.close("all")
+
+
+def test_readme_and_home_count_the_scenes():
+    """The README and the docs home say how many classic systems `nivpjax.scenes` builds
+    (the README said eight, the home nine): count the constructors that return a scene."""
+    constructors = {
+        name: fn
+        for name, fn in inspect.getmembers(nj.scenes, inspect.isfunction)
+        if not name.startswith("_") and fn.__module__ == nj.scenes.__name__
+    }
+    built = [name for name, fn in constructors.items() if isinstance(fn()[0], nj.Scene)]
+    words = "zero one two three four five six seven eight nine ten eleven twelve".split()
+    said = f"{words[len(built)]} classic systems"
+    root = snippets.DOCS.parent
+    for page in (root / "README.md", snippets.DOCS / "index.md"):
+        assert said in page.read_text(), f"{page.name} does not say {said!r} ({built})"
+
+
+def test_readme_test_command_prints_the_summary_line(tmp_path):
+    """The README's test command ends with pytest's summary line (`N passed in ...`), also
+    with a `-q` of the user's: a `-q` in the project's addopts made that `-qq`, which prints
+    dots only. Run on a one-test file with the project's configuration."""
+
+    root = snippets.DOCS.parent
+    readme = (root / "README.md").read_text()
+    command = re.search(r"Run the tests.*?```bash\n(.*?)\n```", readme, re.S).group(1)
+    args = shlex.split(command)
+    assert args[:3] == ["python", "-m", "pytest"] and args[-1] == "tests", command
+    (tmp_path / "test_one.py").write_text("def test_one():\n    pass\n")
+    config = ["-c", str(root / "pyproject.toml"), "--rootdir", str(tmp_path)]
+    config += ["-p", "no:cacheprovider"]
+    # With a `-q` of the user's (without it pytest is more verbose still).
+    run = [sys.executable, *args[1:-1], *config, "-q", str(tmp_path / "test_one.py")]
+    out = subprocess.run(run, capture_output=True, text=True, timeout=300, cwd=tmp_path)
+    last = out.stdout.strip().splitlines()[-1]
+    assert re.search(r"\b1 passed\b", last), (out.stdout, out.stderr)
+
+
+def _headings(page):
+    """The Markdown headings of a page, outside code blocks."""
+    fenced, out = False, []
+    for line in page.read_text().splitlines():
+        if line.lstrip().startswith(("```", "~~~")):
+            fenced = not fenced
+        elif not fenced and re.match(r"#{1,6} ", line):
+            out.append(line)
+    return out
+
+
+def test_headings_and_nav_titles_have_no_tex():
+    """A heading with maths shows as raw TeX in the tables of contents (`The scaling
+    \\(\\rho\\)`): headings and the nav of mkdocs.yml write symbols in Unicode instead."""
+    root = snippets.DOCS.parent
+    pages = [p for p in snippets.DOCS.rglob("*.md") if "_scripts" not in p.parts]
+    pages += sorted((root / "benchmarks" / "results").glob("*.md"))
+    bad = [(p.name, h) for p in pages for h in _headings(p) if check_site.RAW_TEX.search(h)]
+    nav = (root / "mkdocs.yml").read_text().split("\nnav:", 1)[1]
+    bad += [("mkdocs.yml", line) for line in nav.splitlines() if check_site.RAW_TEX.search(line)]
+    assert not bad
+
+
+def test_site_check_finds_raw_tex_in_titles(tmp_path):
+    toc = '<a href="#s" class="md-nav__link"><span>The scaling \\(\\rho\\)</span></a>'
+    (tmp_path / "bad.html").write_text(f"<title>Formulation</title><nav>{toc}</nav>")
+    (tmp_path / "good.html").write_text(
+        '<title>Formulation</title><a class="md-nav__link">The scaling ρ</a>'
+        '<h2>The scaling <span class="arithmatex">\\(\\rho\\)</span></h2>'
+    )
+    problems = check_site.check_titles(tmp_path)
+    assert len(problems) == 1 and problems[0].startswith("bad.html: raw TeX"), problems

@@ -122,7 +122,7 @@ def _run(scene_name, stepper_name, x0, args, t1, control, *, adaptive=True, max_
 
 
 def _code(sol):
-    return nj.RESULTS[sol.result] if sol.result != nj.RESULTS.successful else "successful"
+    return nj.RESULTS[sol.result]
 
 
 def _assert_ok(sol):

@@ -2,8 +2,10 @@
 and the episode return against the objective of the equivalent solve."""
 
 import math
+import warnings
 
 import gymnasium
+import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -82,3 +84,34 @@ def test_episode_return_is_minus_objective(env):
     m = learn.metrics(task, env.params.objective, sol, state.y_ref)
     assert int(state.loop.n_attempts) == int(m.attempts) == steps + 1
     np.testing.assert_allclose(total, -float(m.cost), rtol=1e-6)
+
+
+def test_truncated_after_max_steps_actions():
+    """`truncated` comes with the task's `max_steps`-th step (it came one step early: the
+    task's budget counted `reset`'s attempt). Absolute action 0 steps by h_min: never done."""
+    env = StepSizeGymEnv(action_mode="absolute", task="relay_sliding", t1=0.5, max_steps=12)
+    env.reset(seed=0)
+    flags = [env.step(np.zeros(1, np.float32))[2:4] for _ in range(12)]
+    assert flags[-1] == (False, True) and not any(any(f) for f in flags[:-1])
+    assert int(env._state.steps) == 12 and int(env._state.loop.n_attempts) == 13
+
+
+def test_float32_reset_is_quiet_and_failures_are_in_info():
+    """In float32 (JAX's default), `reset` warned `overflow encountered in cast` (a 1e300 in
+    the features), and a random-action episode ended `terminated` at t = 0.6 of 3 with no
+    word of the failure: `info` now says it (here `h_min`, float32's floor on the step)."""
+    jax.config.update("jax_enable_x64", False)
+    try:
+        env = StepSizeGymEnv(task="relay_sliding")
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            env.reset(seed=0)
+        env.action_space.seed(0)
+        for _ in range(env.max_episode_steps):
+            _, _, terminated, truncated, info = env.step(env.action_space.sample())
+            if terminated or truncated:
+                break
+    finally:
+        jax.config.update("jax_enable_x64", True)
+    assert terminated and info["t"] < 3.0
+    assert info["failed"] and info["result"] == nv.RESULTS[nv.RESULTS.h_min_reached]

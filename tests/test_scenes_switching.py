@@ -107,6 +107,70 @@ def test_relay_filippov_sliding(relay_run):
 
 
 # --------------------------------------------------------------------------------------
+# A relay with bounds [l, u]: w = u where s > 0, w = l where s < 0.
+
+
+def _bounded_relay_dynamics(t, x, a, m):
+    return 1.75 + jnp.sin(t) - m["w"]
+
+
+BOUNDED_RELAY = nj.Scene(
+    _bounded_relay_dynamics, 1, (nj.Relay("w", lambda t, x, a: x[:1], lower=0.5, upper=3.0),)
+)
+
+
+def test_relay_bounds_reaching_and_sliding():
+    """x' = u(t) - w, u = 1.75 + sin t in [0.75, 2.75], w in [0.5, 3] on s = x, x0 = 0.5:
+    x' = u - 3 < 0 until x reaches 0 at T (x0 + 1 - cos T - 1.25 T = 0), then it slides
+    with the equivalent control w = u(t), inside the bounds (a selection [-1, 1] cannot
+    hold it: x' >= 0.75 - 1 there is not enough)."""
+    T = brentq(lambda t: 0.5 + 1 - np.cos(t) - 1.25 * t, 1e-9, 2.0, xtol=1e-16)
+    _, ts, x, m = _run(BOUNDED_RELAY, jnp.asarray([0.5]), None, 3.0, 1e-6, 1e-9)
+    x, w = x[:, 0], m["w"][:, 0]
+    on = np.flatnonzero(np.abs(x) < 1e-12)[0]  # the first accepted state on the surface
+    before, after = ts < ts[on], ts > ts[on]
+    exact = 0.5 + 1 - np.cos(ts[before]) - 1.25 * ts[before]
+    # Measured at rtol 1e-6: free motion off by 2.8e-6, landing 3.7e-6 before T, w = u(t)
+    # to 3e-16 while sliding.
+    np.testing.assert_allclose(x[before], exact, rtol=0, atol=1e-5)
+    assert abs(ts[on] - T) < 2e-5 and after.sum() >= 2
+    np.testing.assert_allclose(w[1:][before[1:]], 3.0, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(x[after], 0.0, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(w[after], 1.75 + np.sin(ts[after]), rtol=0, atol=1e-10)
+    assert np.all((w >= 0.5 - 1e-12) & (w <= 3.0 + 1e-12))
+
+
+def test_relay_bounds_equal_the_scaled_sign_relay():
+    """Two relays with bounds [l, u] per component, forced so that they slide, leave the
+    surface and cross it, against the same system written with a sign relay v in [-1, 1]
+    and w = l + (u - l)(v + 1)/2."""
+    lower, upper = np.array([-0.6, -0.5]), np.array([1.0, 2.0])
+    force = lambda t: jnp.array([1.3 * jnp.sin(2 * t), 0.8 + 1.5 * jnp.sin(3 * t)])  # noqa: E731
+    switch = lambda t, x, a: x  # noqa: E731
+    bounded = nj.Scene(
+        lambda t, x, a, m: force(t) - m["w"],
+        2,
+        (nj.Relay("w", switch, n=2, lower=jnp.asarray(lower), upper=jnp.asarray(upper)),),
+    )
+    scaled = nj.Scene(
+        lambda t, x, a, m: force(t) - (lower + (upper - lower) * (m["v"] + 1) / 2),
+        2,
+        (nj.Relay("v", switch, n=2),),
+    )
+    t_eval = jnp.linspace(0.0, 6.0, 61)
+    x0 = jnp.array([0.3, -0.2])
+    ys = [
+        np.asarray(_run(s, x0, None, 6.0, 1e-6, 1e-9, t_eval=t_eval)[0].y_eval[:, :2])
+        for s in (bounded, scaled)
+    ]
+    # Both components move and slide (x = 0 at 10% and 38% of the outputs).
+    assert np.ptp(ys[0], axis=0).min() > 0.2
+    assert np.all(np.mean(np.abs(ys[0]) < 1e-9, axis=0) > 0.05)
+    # Measured difference 1.5e-7 (about 1350 steps each).
+    np.testing.assert_allclose(ys[0], ys[1], rtol=0, atol=1e-6)
+
+
+# --------------------------------------------------------------------------------------
 # Super-twisting: sigma = x2 + c x1, u = -k1 sqrt|sigma| w + nu, nu' = -k2 w.
 
 ST, ST_X0, ST_ARGS = nj.scenes.super_twisting()

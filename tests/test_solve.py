@@ -289,6 +289,18 @@ def test_max_steps_reported_and_raised():
         jax.jit(lambda y0: nj.solve(oscillator, 0.0, 1.0, y0, 1.0, **kwargs).y_final)(Y0)
 
 
+def test_result_prints_its_message():
+    # `successful` was inherited from optimistix with an empty message: `RESULTS<>`.
+    kwargs = dict(controller=nj.PIDController(rtol=1e-8, atol=1e-10), max_steps=5, throw=False)
+    ok = nj.solve(oscillator, 0.0, 1e-3, Y0, 1.0, **kwargs)
+    bad = nj.solve(oscillator, 0.0, 1.0, Y0, 1.0, **kwargs)
+    assert ok.result == nj.RESULTS.successful
+    assert str(ok.result) == repr(ok.result) == "nivpjax.RESULTS<successful>"
+    assert nj.RESULTS[ok.result] == "successful"
+    assert str(bad.result) == f"nivpjax.RESULTS<{nj.RESULTS[bad.result]}>"
+    assert "Increase `max_steps`" in str(bad.result)
+
+
 def test_h_min_reported():
     # A discontinuous right-hand side with a tolerance the floor on h cannot meet.
     f = lambda t, y, a: jnp.where(t < 0.5, 0.0, 1e6 * t) * jnp.ones_like(y)

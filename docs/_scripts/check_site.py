@@ -2,6 +2,7 @@
 
 1. Every internal link and anchor of every built page resolves, and every script,
    stylesheet, image and font the pages load is local (the site works offline: no CDN).
+   No navigation, table-of-contents or page title shows raw TeX (a heading with maths).
 2. Served on 127.0.0.1 and opened in headless Debian Chromium with every host other than
    127.0.0.1 unresolvable, the maths renders: after the page's JavaScript ran, every
    `arithmatex` element holds rendered KaTeX and none holds a KaTeX error.
@@ -71,9 +72,13 @@ class _Page(html.parser.HTMLParser):
         super().__init__()
         self.links, self.assets, self.ids = [], [], set()
         self.maths = 0
+        self.titles = []  # texts of the navigation and table-of-contents links, the <title>
+        self._title = None
 
     def handle_starttag(self, tag, attrs):
         a = dict(attrs)
+        if tag == "title" or (tag == "a" and "md-nav__link" in (a.get("class") or "").split()):
+            self._title = []
         if "id" in a:
             self.ids.add(a["id"])
         if tag == "a" and a.get("href"):
@@ -84,6 +89,15 @@ class _Page(html.parser.HTMLParser):
             self.assets.append(a["href"])
         if "arithmatex" in (a.get("class") or "").split():
             self.maths += 1
+
+    def handle_data(self, data):
+        if self._title is not None:
+            self._title.append(data)
+
+    def handle_endtag(self, tag):
+        if tag in ("a", "title") and self._title is not None:
+            self.titles.append(" ".join("".join(self._title).split()))
+            self._title = None
 
 
 def _external(url):
@@ -133,6 +147,22 @@ def check_links(site):
         for url in re.findall(r"url\(\s*['\"]?([^'\")]+)", css.read_text(errors="replace")):
             if _external(url) and not url.startswith("data:"):
                 problems.append(f"{css.relative_to(site)}: loads an external asset {url}")
+    return problems
+
+
+# TeX that a navigation or table-of-contents title shows as typed: a heading with maths
+# (`## The scaling $\rho$`) puts `\(\rho\)` there, where nothing renders it.
+RAW_TEX = re.compile(r"\\[(\[]|\\[A-Za-z]+|\$")
+
+
+def check_titles(site):
+    """No raw TeX in the navigation, the tables of contents or the page titles."""
+    problems = []
+    for path in sorted(site.rglob("*.html")):
+        rel = path.relative_to(site).as_posix()
+        for title in sorted(set(_parse(path).titles)):
+            if RAW_TEX.search(title):
+                problems.append(f"{rel}: raw TeX in a navigation or TOC title: {title!r}")
     return problems
 
 
@@ -274,7 +304,7 @@ def main():
     site = opts.site.resolve()
     if not (site / "index.html").exists():
         raise SystemExit(f"check_site: {site}/index.html not found; run `mkdocs build` first")
-    problems = check_links(site) + check_api(site)
+    problems = check_links(site) + check_titles(site) + check_api(site)
     if not opts.no_browser:
         problems += check_browser(site, opts.out.resolve())
     for p in problems:

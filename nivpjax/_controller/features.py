@@ -2,6 +2,7 @@
 attempted step."""
 
 import abc
+import math
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -13,9 +14,12 @@ from .base import StepInfo
 
 
 _LOG_CLIP = 25.0  # |log| beyond this carries no more information (e^25 ~ 7e10)
+# The floor below which every log is clipped anyway; 1 / floor stands for inf. Both fit
+# float32 (a floor of 1e-300 made 1e300, which overflowed the cast to float32).
+_FLOOR = math.exp(-_LOG_CLIP)
 
 
-def safe_log(x, floor=1e-300):
+def safe_log(x, floor=_FLOOR):
     """$\\log\\max(x, \\text{floor})$, clipped to $[-25, 25]$: finite for $x \\le 0$, NaN or
     inf, and with a zero derivative there (guards the loop body of finished members)."""
     x = jnp.where(jnp.isfinite(x), x, jnp.where(jnp.isnan(x), floor, 1.0 / floor))

@@ -8,6 +8,7 @@ import numpy as np
 
 from .._projector import AbstractProjector, Box, EventLocated, NonNegative
 from .base import AbstractEffect, OnScene, scene_state
+from .bounds import check_bounds
 
 
 class _SaturationSurface(eqx.Module):
@@ -33,25 +34,39 @@ class _DiodeSurface(eqx.Module):
 
 
 class Relay(AbstractEffect):
-    r"""A relay / sign nonlinearity $w \in \operatorname{sign}(s(t, x))$ as `size`
-    multipliers $w \in [-1, 1]$ (Filippov's convexification: in sliding mode $w$ takes the
-    equivalent-control value). The dynamics read it as `multipliers[name]`. Crossings of
-    $s = 0$ inside a step are located by the step-size controller
-    ([`nivpjax.EventLocated`][]).
+    r"""A relay / sign nonlinearity as `n` multipliers $w$ with bounds $\ell < u$:
+    $w = u$ where $s(t, x) > 0$, $w = \ell$ where $s < 0$, $w \in [\ell, u]$ at $s = 0$
+    (Filippov's convexification: in sliding mode $w$ takes the equivalent-control value).
+    The default bounds $[-1, 1]$ make it $w \in \operatorname{sign}(s)$; others are the
+    affine image $w = \ell + (u - \ell)(v + 1)/2$ of such a $v$ (Siconos' `RelayNSL`).
+    The dynamics read it as `multipliers[name]`. Crossings of $s = 0$ inside a step are
+    located by the step-size controller ([`nivpjax.EventLocated`][]).
 
-    - `switch(t, x, args) -> (size,)`: the switching function $s$.
+    **Arguments:**
+
+    - `name`: the key of its multipliers.
+    - `switch`: `switch(t, x, args) -> (n,)`, the switching function $s$.
+    - `n`: the number of relays (default 1).
+    - `lower`, `upper`: the bounds $\ell < u$ (default $-1$, $1$), scalars or arrays of
+      shape `(n,)`; JAX arrays are run-time values (sweep or differentiate them).
     """
 
     name: str = eqx.field(static=True)
     switch: Callable
     n: int = eqx.field(static=True, default=1)
+    lower: object = -1.0
+    upper: object = 1.0
+
+    def __check_init__(self):
+        check_bounds(self.lower, self.upper, self.n)
 
     @property
     def size(self):
         return self.n
 
     def blocks(self, n_states, offset):
-        projector = EventLocated(Box(-1.0, 1.0), OnScene(self.switch, n_states), saltation=True)
+        box = Box(self.lower, self.upper)
+        projector = EventLocated(box, OnScene(self.switch, n_states), saltation=True)
         return [(np.arange(offset, offset + self.n), projector)]
 
     def constraint(self, t, x, lam, args):
@@ -113,10 +128,21 @@ class Diode(AbstractEffect):
 
 
 class SetValued(AbstractEffect):
-    r"""A user-defined multiplier effect: `size` multipliers $\lambda \in K$ for any
-    projector $K$, with algebraic rows `constraint(t, x, lam, args)` (the stage solves
-    $\lambda = P_K(\lambda + \rho\,\text{constraint})$). `equation=True` scales the rows as
-    algebraic equations."""
+    r"""A user-defined multiplier effect: `n` multipliers $\lambda \in K$ for any
+    projector $K$, with algebraic rows `constraint_fn(t, x, lam, args)` (the stage solves
+    $\lambda = P_K(\lambda + \rho\,\text{constraint})$). `is_equation=True` scales the rows
+    as algebraic equations.
+
+    **Arguments:**
+
+    - `name`: the key of its multipliers.
+    - `projector`: the set $K$, a [`nivpjax.AbstractProjector`][] on the `n` multipliers.
+    - `constraint_fn`: `constraint_fn(t, x, lam, args) -> (n,)`, the algebraic rows.
+    - `n`: the number of multipliers (default 1).
+    - `is_equation`: scale the rows as algebraic equations with $O(1)$ sensitivity to
+      $\lambda$ ($\rho = \tau$) rather than multipliers entering the state with weight $h$
+      ($\rho = \tau / h$; default).
+    """
 
     name: str = eqx.field(static=True)
     projector: AbstractProjector

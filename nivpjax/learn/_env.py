@@ -53,7 +53,9 @@ class StepSizeEnv(eqx.Module):
       (`h_min`, nonlinear failure, or `max_steps` attempts: `info["truncated"]`). Summed
       over an episode, the rewards are minus the objective of the equivalent
       [`nivpjax.solve`][] with a [`nivpjax.PolicyController`][]. After `done`, steps change
-      nothing and return reward 0.
+      nothing and return reward 0. `info`: `terminated`, `truncated`, `failed` (the solve
+      failed: `h_min` or the nonlinear solve; the code is `state.loop.result`), the
+      accuracy term's `error`, and `t`, `h` of the attempt.
 
     **Arguments:**
 
@@ -199,6 +201,7 @@ class StepSizeEnv(eqx.Module):
         info = {
             "terminated": (at_end | failed) & ~keep,
             "truncated": truncated & ~keep,
+            "failed": failed & ~keep,
             "error": error,
             "t": out.loop.t,
             "h": out.loop.h_last,

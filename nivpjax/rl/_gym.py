@@ -1,6 +1,7 @@
 """gymnasium wrappers of the functional step-size environment: one compiled `reset` and
 `step`, and a vector environment that steps a whole batch in one compiled call."""
 
+import dataclasses
 from typing import Any
 
 import gymnasium
@@ -14,6 +15,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from .._compiler import filter_jit
+from .._results import RESULTS
 from ..learn import EnvParams, Objective, StepSizeEnv, Task
 from ..learn.tasks import TASKS
 
@@ -22,14 +24,23 @@ _FEATURE_BOUND = 30.0  # every feature of StepFeatures lies within +-25
 
 
 def _functional(task, action_mode, objective, task_kwargs):
+    """The functional env, and the episode length: the task's `max_steps` actions. The
+    task's budget counts attempts, `reset`'s first one (PID's initial step) included, which
+    left an agent `max_steps - 1` actions: the env gets one more attempt."""
     if isinstance(task, str):
         if task not in TASKS:
             raise ValueError(f"`task` must be one of {sorted(TASKS)} or a Task, got {task!r}.")
         task = TASKS[task](**task_kwargs)
     elif not isinstance(task, Task):
         raise TypeError(f"`task` must be a task name or a nivpjax.learn.Task, got {task!r}.")
-    env = StepSizeEnv(task, action_mode=action_mode)
-    return env, EnvParams(Objective() if objective is None else objective)
+    actions = task.max_steps
+    env = StepSizeEnv(dataclasses.replace(task, max_steps=actions + 1), action_mode=action_mode)
+    return env, EnvParams(Objective() if objective is None else objective), actions
+
+
+def _result(result, i=None):
+    """The message of a result code (of member `i` of a batch of them)."""
+    return RESULTS[result if i is None else jax.tree.map(lambda v: v[i], result)]
 
 
 def _spaces(env: StepSizeEnv):
@@ -74,8 +85,12 @@ class StepSizeGymEnv(gymnasium.Env):
       reference environment's convention);
     - reward: minus the [`nivpjax.learn.Objective`][] (work per attempt; accuracy at the end);
     - `reset(seed=...)` draws scene parameters (and solves the reference);
-    - `terminated` at `t1` or on a failure; `truncated` after `max_episode_steps` attempts
-      (default: the task's `max_steps`).
+    - `terminated` at `t1` or on a failure; `truncated` after `max_episode_steps` steps
+      (default: the task's `max_steps`; the attempt `reset` makes with PID's initial step
+      does not count);
+    - `info`: `t`, `h` and `error` of the attempt, `failed` (the solve failed: `h_min`
+      reached or the nonlinear solve failed) and `result`, the solve's
+      [`nivpjax.RESULTS`][] message (`"successful"` unless it failed).
 
     **Arguments:** `task` (a name of `nivpjax.learn.tasks.TASKS` or a
     [`nivpjax.learn.Task`][]), `action_mode`, `objective`, `max_episode_steps`, and
@@ -93,9 +108,9 @@ class StepSizeGymEnv(gymnasium.Env):
         max_episode_steps: int | None = None,
         **task_kwargs: Any,
     ):
-        self.env, self.params = _functional(task, action_mode, objective, task_kwargs)
+        self.env, self.params, actions = _functional(task, action_mode, objective, task_kwargs)
         self.observation_space, self.action_space = _spaces(self.env)
-        self.max_episode_steps = max_episode_steps or self.env.task.max_steps
+        self.max_episode_steps = max_episode_steps or actions
         self._state = None
 
     def _obs(self, obs):
@@ -120,13 +135,16 @@ class StepSizeGymEnv(gymnasium.Env):
             not terminated and int(self._state.steps) >= self.max_episode_steps
         )
         extra = {"t": float(info["t"]), "h": float(info["h"]), "error": float(info["error"])}
+        extra["failed"] = bool(info["failed"])
+        extra["result"] = _result(self._state.loop.result)
         return self._obs(obs), float(reward), terminated, truncated, extra
 
 
 class StepSizeVectorEnv(VectorEnv):
     """`num_envs` step-size environments stepped in one compiled, vmapped call (autoreset
     on the step after an episode ends, gymnasium's `NEXT_STEP` mode). Member `i` of
-    `reset(seed=s)` is the single environment reset with `seed=s + i`."""
+    `reset(seed=s)` is the single environment reset with `seed=s + i`; `info` holds arrays
+    of the single environment's entries."""
 
     metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP}
 
@@ -143,11 +161,11 @@ class StepSizeVectorEnv(VectorEnv):
         if not (isinstance(num_envs, int) and num_envs >= 1):
             raise ValueError(f"`num_envs` must be a positive int, got {num_envs!r}.")
         self.num_envs = num_envs
-        self.env, self.params = _functional(task, action_mode, objective, task_kwargs)
+        self.env, self.params, actions = _functional(task, action_mode, objective, task_kwargs)
         self.single_observation_space, self.single_action_space = _spaces(self.env)
         self.observation_space = batch_space(self.single_observation_space, num_envs)
         self.action_space = batch_space(self.single_action_space, num_envs)
-        self.max_episode_steps = max_episode_steps or self.env.task.max_steps
+        self.max_episode_steps = max_episode_steps or actions
         self._state = None
         self._rngs = None
         self._autoreset = np.zeros(num_envs, bool)
@@ -183,6 +201,7 @@ class StepSizeVectorEnv(VectorEnv):
         truncated = np.asarray(info["truncated"]) | (
             ~terminated & (np.asarray(state.steps) >= self.max_episode_steps)
         )
+        failed = np.asarray(info["failed"])
         if self._autoreset.any():
             members = set(np.flatnonzero(self._autoreset).tolist())
             fresh_obs, fresh = _vreset(self.env, self._keys(members), self.params)
@@ -196,7 +215,11 @@ class StepSizeVectorEnv(VectorEnv):
             reward = np.where(self._autoreset, 0.0, reward)
             terminated = np.where(self._autoreset, False, terminated)
             truncated = np.where(self._autoreset, False, truncated)
+            failed = np.where(self._autoreset, False, failed)
         self._state = state
         self._autoreset = terminated | truncated
         extra = {"t": np.asarray(info["t"]), "h": np.asarray(info["h"])}
+        extra["error"] = np.asarray(info["error"])
+        extra["failed"] = failed
+        extra["result"] = np.array([_result(state.loop.result, i) for i in range(self.num_envs)])
         return self._obs(obs), reward, terminated, truncated, extra
