@@ -86,8 +86,9 @@ def spring_slider(
 
 def relay(amplitude=0.5, frequency=1.0, x0=0.5):
     r"""Relay feedback with a disturbance: $x' = -\operatorname{sign}(x) + d(t)$,
-    $d(t) = a \sin(2\pi f t)$, $|a| < 1$. The state reaches $x = 0$ in finite time and slides
-    there with the Filippov selection $w = d(t)$. Multiplier `"w"`."""
+    $d(t) = a \sin(2\pi f t)$. With $|a| < 1$ the state reaches $x = 0$ in finite time and
+    slides there for good with the Filippov selection $w = d(t)$; with $|a| > 1$ it slides
+    while $|d(t)| \le 1$ and leaves the surface every half period. Multiplier `"w"`."""
 
     def dynamics(t, x, a, m):
         return -m["w"] + a["amplitude"] * jnp.sin(2 * jnp.pi * a["frequency"] * t)
