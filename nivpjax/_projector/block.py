@@ -164,18 +164,18 @@ class BlockProjector(AbstractProjector):
 
     def acts_on(self, n: int) -> np.ndarray:
         """The rows of the blocks whose projectors may move them."""
-        mask = np.zeros(n, bool)
-        for indices, projector in self.blocks:
-            idx = np.asarray(indices)
-            mask[idx] = projector.acts_on(idx.size)
-        return mask
+        return self._rows(n, lambda projector, m: projector.acts_on(m))
 
     def weighed_rows(self, n: int) -> np.ndarray:
         """The rows of the blocks whose projectors weigh their reactions."""
+        return self._rows(n, lambda projector, m: projector.weighed_rows(m))
+
+    def _rows(self, n, mask_of):
+        # A static row mask of size n from each block's own mask of its rows.
         mask = np.zeros(n, bool)
         for indices, projector in self.blocks:
             idx = np.asarray(indices)
-            mask[idx] = projector.weighed_rows(idx.size)
+            mask[idx] = mask_of(projector, idx.size)
         return mask
 
     @property
