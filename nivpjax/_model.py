@@ -299,14 +299,17 @@ class Model(eqx.Module):
         r = jax.jvp(prox, (s,), (jnp.ones_like(s),))[1] - f
         return jnp.where(self.weighed, r, 0.0)
 
-    def law_reaction_flow(self, t, h, y, rate, args):
-        r"""`(r, r_dot)`: `law_reaction` at `(t, y)` and its derivative along the state rate
-        `rate`, $\partial_t r + \partial_y r \cdot$ `rate` (one JVP)."""
+    def law_reaction_linearized(self, t, h, y, args):
+        r"""`(r, along)`: `law_reaction` at `(t, y)` under the vector field there, and
+        `along(rate)`, its derivative along a state rate,
+        $\partial_t r + \partial_y r \cdot$ `rate` (one linearisation: the reaction is
+        needed for the rate before its derivative along it)."""
 
         def law(tt, yy):
             return self.law_reaction(tt, h, yy, self.f(tt, yy, args), args)
 
-        return jax.jvp(law, (t, y), (jnp.ones_like(t), rate))
+        r, linear = jax.linearize(law, t, y)
+        return r, lambda rate: linear(jnp.ones_like(t), rate)
 
     def _explicit_rate(self, t_end, h, y_prev, f_explicit, args, event_sensitivity):
         # The explicit start rate of a stage as a function of its iterate, for the stage's

@@ -75,10 +75,12 @@ def _effective(model, t, h, y, f, reaction, y0, y1, switched, args):
     if not model.has_weighed:
         rate = state_rate(model, t, y, f + reaction, y0, y1, h, switched, args)
         return f, rate, flow_derivative(model, t, y, rate, args)
-    r = jnp.where(model.weighed, model.law_reaction(t, h, y, f, args), reaction)
+    law, along = model.law_reaction_linearized(t, h, y, args)
+    r = jnp.where(model.weighed, law, reaction)
     rate = state_rate(model, t, y, f + r, y0, y1, h, switched, args)
-    _, r_dot = model.law_reaction_flow(t, h, y, rate, args)
-    return f + r - reaction, rate, flow_derivative(model, t, y, rate, args) + r_dot
+    # F differs from f on the weighed rows only: elsewhere r is constant over the step.
+    F = jnp.where(model.weighed, f + r, f)
+    return F, rate, flow_derivative(model, t, y, rate, args) + along(rate)
 
 
 def switch_kink_error(model, theta, t0, h, y0, y1, f0, f1, switched, args):
