@@ -25,6 +25,7 @@ Writes `benchmarks/results/reliability.{csv,md,png}` and the table of
 
 import argparse
 import csv
+import itertools
 import os
 import time
 from pathlib import Path
@@ -153,40 +154,35 @@ def judge(family, order, rows):
 
 def campaign(families, steppers, solvers, controls, rtols, grid_slice, log=print):
     rows = []
-    for family in families:
-        for stepper in steppers:
-            order = STEPPERS[stepper][1]
-            for solver in solvers:
-                for control in controls:
-                    t0 = time.perf_counter()
-                    scene, run = compiled_run(family, stepper, solver, control)
-                    for g, params in enumerate(family.grid[grid_slice]):
-                        runs = []
-                        for rtol in rtols:
-                            if order == 1 and rtol < FIRST_ORDER_MIN_RTOL:
-                                continue
-                            row = run_one(family, scene, run, params, rtol)
-                            row.update(
-                                family=family.name,
-                                stepper=stepper,
-                                solver=solver,
-                                control=control,
-                                point=g,
-                                rtol=rtol,
-                            )
-                            runs.append(row)
-                        rows += judge(family, order, runs)
-                    cfg = [r for r in rows if r["family"] == family.name]
-                    cfg = [
-                        r
-                        for r in cfg
-                        if (r["stepper"], r["solver"], r["control"]) == (stepper, solver, control)
-                    ]
-                    log(
-                        f"{family.name:15s} {stepper:13s} {solver:3s} {control:9s} "
-                        + " ".join(r["verdict"][0] for r in cfg)
-                        + f"  {time.perf_counter() - t0:6.1f} s"
-                    )
+    for family, stepper, solver, control in itertools.product(
+        families, steppers, solvers, controls
+    ):
+        t0 = time.perf_counter()
+        runs = run_config(family, stepper, solver, control, rtols, grid_slice)
+        log(
+            f"{family.name:15s} {stepper:13s} {solver:3s} {control:9s} "
+            + " ".join(r["verdict"][0] for r in runs)
+            + f"  {time.perf_counter() - t0:6.1f} s"
+        )
+        rows += runs
+    return rows
+
+
+def run_config(family, stepper, solver, control, rtols, grid_slice):
+    """The judged runs of one configuration over its grid points and tolerances."""
+    order = STEPPERS[stepper][1]
+    scene, run = compiled_run(family, stepper, solver, control)
+    rows = []
+    for g, params in enumerate(family.grid[grid_slice]):
+        runs = []
+        for rtol in rtols:
+            if order == 1 and rtol < FIRST_ORDER_MIN_RTOL:
+                continue
+            row = run_one(family, scene, run, params, rtol)
+            row.update(family=family.name, stepper=stepper, solver=solver, control=control)
+            row.update(point=g, rtol=rtol)
+            runs.append(row)
+        rows += judge(family, order, runs)
     return rows
 
 
