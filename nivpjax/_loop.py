@@ -335,12 +335,22 @@ def interpolate(sol: Solution, t_eval, model: Model | None = None, args=None):
     Without `model`: piecewise linear. With it, each step is interpolated as the steppers
     start it (`Model.step_start`: the impacts closing at its start applied, the
     right-limit selections there), by the cubic Hermite interpolant of the two end states
-    and rates on differential rows (exact for a ball's parabola, whose steps event
-    prediction makes long: the linear interpolant was off by $g h^2/8$, 0.47 m mid-flight
-    on a drop from 1 m), linearly on algebraic rows (multipliers) and on rows a projector
-    moves (their reactions, a resting contact's force or friction through a stick, are not
-    in the vector field, so its rates there are not the state's: a stuck slider's velocity
-    would bulge by $k V h^2/8$ between the ends of a long stick).
+    and rates (third order: local error $O(h^4)$; exact for a ball's parabola, whose
+    steps event prediction makes long), linearly on algebraic rows (multipliers).
+
+    On rows a projector moves (`Model.rated_rows`), the rates are the ones the state
+    takes (`Model.projected_rate`: zero normal motion where a set holds a row at a
+    face, the vector field's where it is free, a friction law's reaction added), and
+    every value is projected back into its set (`Model.project_rows`; not on a proximal
+    map's rows, which no set constrains): a cubic between two points of a box can
+    overshoot it, and a face left inside a step is then met with the kink the flow has.
+    A row free at a step's start and held at its end reached its face inside the step:
+    it is interpolated by the flow from the start, $y_0 + h w\,(r_0 + w (r_1 - r_0)/2)$
+    (second order), projected, which stops it at the face where the flow reaches it
+    instead of bending the cubic to arrive there at the step's end. Models with
+    impulses keep the rows a projector moves linear (a contact's velocity jumps inside a
+    step, which no rate per end describes; a resting contact's force is not in the
+    vector field).
 
     A step across which a switch happens (`Model.switch_jump`) interpolates from its start
     moved by the saltation term $(f^- - f^+)\,d\tau$, zero in value: the interpolant's
@@ -353,30 +363,66 @@ def interpolate(sol: Solution, t_eval, model: Model | None = None, args=None):
     ta, tb = sol.ts[idx], sol.ts[jnp.minimum(idx + 1, k)]
     ya, yb = sol.ys[idx], sol.ys[jnp.minimum(idx + 1, k)]
     span = jnp.where(tb > ta, tb - ta, 1.0)
-    w = jnp.clip((t_eval - ta) / span, 0.0, 1.0)[:, None]
+    w = jnp.clip((t_eval - ta) / span, 0.0, 1.0)
     if model is None:
-        y = ya + w * (yb - ya)
+        y = ya + w[:, None] * (yb - ya)
     else:
         safe_tb = jnp.where(tb > ta, tb, ta + 1.0)  # a finished run's padding
-        ends = jax.vmap(lambda t0, y0, t1, y1: _step_ends(model, t0, y0, t1, y1, args))
-        ya, ra, rb = ends(ta, ya, safe_tb, yb)
-        linear = ya + w * (yb - ya)
-        h = span[:, None]
-        hermite = cubic_hermite(ya, yb, h * ra, h * rb, w)
-        # Rows a projector moves carry reactions the vector field does not contain (a
-        # resting contact's force, friction ramping through a stick): their end rates
-        # are not the state's, and they are interpolated linearly.
-        projected = model.projector.acts_on(sol.ys.shape[-1])
-        y = jnp.where(model.algebraic | projected, linear, hermite)
+        inside = jax.vmap(lambda *a: _in_step(model, *a, args))
+        y = inside(t_eval, w, ta, ya, safe_tb, yb)
     beyond = t_eval > sol.ts[k] * (1 + 1e-12) + 1e-300
     return jnp.where(beyond[:, None], jnp.nan, y)
 
 
-def _step_ends(model: Model, t0, y0, t1, y1, args):
-    # The start state of the step [t0, t1] as the steppers take it (impacts applied,
-    # right-limit selections, the saltation shift of a switch inside), and the state-unit
-    # rates at both ends.
+def _in_step(model: Model, t, w, t0, y0, t1, y1, args):
+    # The state at the fraction w of the step [t0, t1], from the start as the steppers
+    # take it (impacts applied, right-limit selections, the saltation shift of a switch
+    # inside); see `interpolate`.
     h = t1 - t0
     y0, f0, _ = model.step_start(t0, h, y0, args)
     y0 = y0 + model.switch_jump(t0, y0, t1, y1, args)
-    return y0, model.to_state(f0), model.to_state(model.f(t1, y1, args))
+    f1 = model.f(t1, y1, args)
+    r0, r1 = model.to_state(f0), model.to_state(f1)
+    linear = y0 + w * (y1 - y0)
+    if not model.rated_rows.any():
+        projected = jnp.asarray(model.projector.acts_on(y0.shape[0]))
+        hermite = cubic_hermite(y0, y1, h * r0, h * r1, w)
+        return jnp.where(model.algebraic | projected, linear, hermite)
+    p0, held0 = model.projected_rate(t0, h, y0, f0, args)
+    p1, held1 = model.projected_rate(t1, h, y1, f1, args)
+    sets = jnp.asarray(model.rated_rows) & ~model.algebraic & ~model.weighed
+    y = cubic_hermite(y0, y1, h * p0, h * p1, w)
+    a0 = _rate_change(model, t0, y0, r0, args)
+    a1 = _rate_change(model, t1, y1, r1, args)
+    y = jnp.where(sets & ~held0 & held1, _reached(y0, r0, r1, h * a0, h, w), y)
+    y = jnp.where(sets & held0 & ~held1, _left(y0, y1, r0, r1, h * a1, h, w), y)
+    y = jnp.where(model.algebraic, linear, y)
+    return model.project_rows(t, h, y, sets, args)
+
+
+def _rate_change(model: Model, t, y, rate, args):
+    # The derivative of the free rate along the flow at (t, y), state units.
+    field = lambda tt, yy: model.f(tt, yy, args)  # noqa: E731
+    return model.to_state(jax.jvp(field, (t, y), (jnp.ones_like(t), rate))[1])
+
+
+def _reached(y0, r0, r1, da0, h, w):
+    # A face reached inside the step: the free flow from the start, its rate the quadratic
+    # in w with the free rates at both ends and the rate's derivative `da0` (times h) at
+    # the start (third order), which the projection stops at the face.
+    c = r1 - r0 - da0
+    return y0 + h * w * (r0 + w * (0.5 * da0 + w * c / 3))
+
+
+def _left(y0, y1, r0, r1, da1, h, w):
+    # A face left inside the step: held at the start's value until the free rate,
+    # interpolated linearly between the ends, turns from pushing into the face (r0) to
+    # leaving it (r1); after that the free flow back from the end (its rate the quadratic
+    # with the free rates at both ends and the derivative `da1` at the end). Where the
+    # rates do not change sign, the flow back throughout (the projection holds it).
+    turns = r0 * r1 < 0
+    w_leave = jnp.where(turns, r0 / jnp.where(turns, r0 - r1, 1.0), 0.0)
+    v = w - 1
+    c = r0 - r1 + da1
+    back = y1 + h * v * (r1 + v * (0.5 * da1 + v * c / 3))
+    return jnp.where(w < w_leave, y0, back)

@@ -285,9 +285,19 @@ class Model(eqx.Module):
         """The reaction (units of $f$) of the weighed rows' law at `(t, y)` under the
         smooth rate `f`, zero on other rows; `h` only sets the JVP's point $10^{-6} h$
         (see `_weighed_start`)."""
+        f = jnp.where(self.weighed, f, 0.0)
+        s = 1e-6 * jnp.where(h > 0, h, 1.0)
+        return jnp.where(self.weighed, self._prox_rate(t, s, y, f, args) - f, 0.0)
+
+    def _prox_rate(self, t, s, y, f, args):
+        r"""$\frac{d}{ds} P_s(y + s f)$ at a small $s > 0$ ($s \to 0^+$), $P_s$ the projector
+        with weight $s$: the rate the projector lets a state at `y` take under the smooth
+        rate `f` (units of $f$): `f` where no set holds a row, its tangential part at a
+        face, the law's reaction added on a proximal map's rows. A JVP at a small positive
+        $s$, not a difference quotient: no digits lost, and the projectors' kink rules at
+        $s = 0$ (the identity on the set) never apply."""
         # The stage's fixed point y = P(y - rho R) takes R in the units of f: at s -> 0 the
         # point projected is y + s f (per row of a diagonal A), not y + s A^-1 f.
-        f = jnp.where(self.weighed, f, 0.0)
 
         def prox(s):
             ctx = ProjectionContext(
@@ -295,9 +305,43 @@ class Model(eqx.Module):
             )
             return self.projector(y + s * f, ctx)
 
-        s = 1e-6 * jnp.where(h > 0, h, 1.0)
-        r = jax.jvp(prox, (s,), (jnp.ones_like(s),))[1] - f
-        return jnp.where(self.weighed, r, 0.0)
+        return jax.jvp(prox, (s,), (jnp.ones_like(s),))[1]
+
+    @property
+    def rated_rows(self) -> np.ndarray:
+        """The rows a projector moves whose rate at a point is its projected one
+        (`projected_rate`; a static NumPy mask, algebraic rows included): every row the
+        projector acts on, none with impulses (a contact's velocities jump at impacts
+        inside a step, which one rate per end does not describe)."""
+        n = self.algebraic.shape[0]
+        if self.has_impulses:
+            return np.zeros(n, bool)
+        return np.asarray(self.projector.acts_on(n), bool)
+
+    def projected_rate(self, t, h, y, f, args):
+        """`(rate, held)` at `(t, y)` under the vector field's value `f` there: the rate
+        (state units) the state takes from there, `f` projected (`_prox_rate`) on the
+        differential `rated_rows` (zero normal motion where a set holds a row at a face, a
+        proximal map's reaction added: friction), and the rows where that differs from
+        `f` (held at a face, or a reaction acting). `h` only sets the JVP's point:
+        $s = 10^{-6} h$, or more (up to $10^{-2} h$) where $y + s f$ would round to $y$
+        (float32: a state at a face would then read as inside the set, free)."""
+        if not self.rated_rows.any():
+            return self.to_state(f), jnp.zeros(y.shape, bool)
+        rows = jnp.asarray(self.rated_rows) & ~self.algebraic
+        f_rows = jnp.where(rows, f, 0.0)
+        finfo = jnp.finfo(y.dtype)
+        speed = jnp.max(jnp.abs(f_rows)) / (1 + jnp.max(jnp.abs(y)))
+        h = jnp.where(h > 0, h, 1.0)
+        s = jnp.clip(64 * finfo.eps / jnp.maximum(speed, finfo.tiny), 1e-6 * h, 1e-2 * h)
+        moved = jnp.where(rows, self._prox_rate(t, s, y, f_rows, args), f)
+        return self.to_state(moved), rows & (moved != f)
+
+    def project_rows(self, t, h, y, rows, args):
+        """`y` with the rows `rows` (a boolean mask) replaced by the projector's value at
+        `y` (weight `h`): an interpolated state put back into its sets."""
+        ctx = ProjectionContext(t=t, h=h, y_prev=y, y_iter=y, rho=jnp.full_like(y, h), args=args)
+        return jnp.where(rows, self.projector(y, ctx), y)
 
     def law_reaction_linearized(self, t, h, y, args):
         r"""`(r, along)`: `law_reaction` at `(t, y)` under the vector field there, and
