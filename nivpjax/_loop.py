@@ -341,16 +341,21 @@ def interpolate(sol: Solution, t_eval, model: Model | None = None, args=None):
     On rows a projector moves (`Model.rated_rows`), the rates are the ones the state
     takes (`Model.projected_rate`: zero normal motion where a set holds a row at a
     face, the vector field's where it is free, a friction law's reaction added), and
-    every value is projected back into its set (`Model.project_rows`; not on a proximal
-    map's rows, which no set constrains): a cubic between two points of a box can
-    overshoot it, and a face left inside a step is then met with the kink the flow has.
-    A row free at a step's start and held at its end reached its face inside the step:
-    it is interpolated by the flow from the start, $y_0 + h w\,(r_0 + w (r_1 - r_0)/2)$
-    (second order), projected, which stops it at the face where the flow reaches it
-    instead of bending the cubic to arrive there at the step's end. Models with
-    impulses keep the rows a projector moves linear (a contact's velocity jumps inside a
-    step, which no rate per end describes; a resting contact's force is not in the
-    vector field).
+    every value is projected back into its set (`Model.project_rows`, the last
+    operation: each output lies in its set exactly; not on a proximal map's rows, which
+    no set constrains): a cubic between two points of a box can overshoot it.
+
+    A phase that begins or ends inside a step is read off the rates at its ends, per row.
+    A row free at the start and held at the end reached its face inside the step: it
+    follows the free flow from the start (`_reached`: its rate the quadratic in $w$
+    through the free rates at both ends and the rate's derivative at the start, third
+    order), which the projection stops at the face where the flow reaches it, instead of
+    a cubic bent to arrive there at the step's end ($O(h\,|f|)$ off). A row held at the
+    start and free at the end left its face: it stays there until the free rate,
+    interpolated linearly, turns away from the face, and follows the free flow back from
+    the end after (`_left`). Models with impulses keep the rows a projector moves linear
+    (a contact's velocity jumps inside a step, which no rate per end describes; a
+    resting contact's force is not in the vector field).
 
     A step across which a switch happens (`Model.switch_jump`) interpolates from its start
     moved by the saltation term $(f^- - f^+)\,d\tau$, zero in value: the interpolant's

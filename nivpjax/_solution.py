@@ -63,8 +63,8 @@ class Solution(eqx.Module):
     - `n_accepted`, `n_rejected`, `n_iterations`: counts (iterations include rejected steps).
     - `result`: a [`nivpjax.RESULTS`][] code.
     - `t_eval`, `y_eval`: the solution at the requested output times (cubic Hermite
-      interpolation between accepted steps on differential rows no projector moves,
-      linear on the others), or `None`.
+      interpolation between accepted steps on differential rows, with projected rates and
+      values on rows a set constrains; linear on algebraic rows), or `None`.
     - `attempts`: an [`nivpjax.AttemptLog`][] or `None`.
     """
 

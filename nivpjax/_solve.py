@@ -78,9 +78,10 @@ def solve(
       [`nivpjax.ConstantStepSize`][] with `h0` for fixed steps.
     - `h0`: the initial step (estimated if `None` and the controller is adaptive).
     - `t_eval`: optional output times in $[t_0, t_1]$; the solution there is interpolated
-      into `Solution.y_eval` (cubic Hermite on differential rows no projector moves, from
-      each step's start as the stepper took it, linear on the others; see
-      `nivpjax._loop.interpolate`).
+      into `Solution.y_eval`: cubic Hermite on differential rows, from each step's start as
+      the stepper took it, with the projected rates on rows a set constrains and each value
+      projected back into its set; linear on algebraic rows (see
+      `nivpjax._loop.interpolate` and the error-control page).
     - `max_steps`: bound on attempted steps; buffers have `max_steps + 1` rows.
     - `error_estimate`: `"auto"` uses the stepper's embedded estimate when it has one and
       Richardson step doubling otherwise; `"richardson"` forces step doubling.

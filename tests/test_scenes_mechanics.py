@@ -435,8 +435,8 @@ def test_ball_outputs_between_long_steps():
 def test_slider_outputs_inside_a_long_stick():
     # The driven slider is stuck until t = 6 while the spring force ramps up: the stick is
     # a few long steps, and outputs inside them must stay stuck. Friction is a reaction the
-    # vector field does not contain, so the velocity row is interpolated linearly; Hermite
-    # through the vector field's rates (shifted to the chord) bulged by k V h^2 / 8.
+    # vector field does not contain: the velocity row's rates are the projected ones (zero
+    # in the stick); Hermite through the vector field's rates bulged by k V h^2 / 8.
     scene, x0, args = nj.scenes.spring_slider(**DRIVEN)
     ts = np.linspace(0.5, 5.5, 11)
     sol = scene.solve(0.0, 5.9, x0, args, t_eval=jnp.asarray(ts))
