@@ -353,7 +353,9 @@ def interpolate(sol: Solution, t_eval, model: Model | None = None, args=None):
     a cubic bent to arrive there at the step's end ($O(h\,|f|)$ off). A row held at the
     start and free at the end left its face: it stays there until the free rate,
     interpolated linearly, turns away from the face, and follows the free flow back from
-    the end after (`_left`). Models with impulses keep the rows a projector moves linear
+    the end after (`_left`). A friction row moving at the start and stuck at the end
+    (zero projected rate) follows the flow from the start, held at the end's value from
+    where it reaches it (`_stuck`). Models with impulses keep the rows a projector moves linear
     (a contact's velocity jumps inside a step, which no rate per end describes; a
     resting contact's force is not in the vector field).
 
@@ -401,6 +403,12 @@ def _in_step(model: Model, t, w, t0, y0, t1, y1, args):
     a1 = _rate_change(model, t1, y1, r1, args)
     y = jnp.where(sets & ~held0 & held1, _reached(y0, r0, r1, h * a0, h, w), y)
     y = jnp.where(sets & held0 & ~held1, _left(y0, y1, r0, r1, h * a1, h, w), y)
+    if model.has_weighed:
+        # Held: zero rate up to the round-off of the law's reaction cancelling f.
+        small = jnp.sqrt(jnp.finfo(y0.dtype).eps) * (jnp.abs(p0) + jnp.abs(r1))
+        stuck = model.weighed & (jnp.abs(p0) > small) & (jnp.abs(p1) <= small)
+        da0 = h * _rate_change(model, t0, y0, p0, args)
+        y = jnp.where(stuck, _stuck(y0, y1, p0, da0, h, w), y)
     y = jnp.where(model.algebraic, linear, y)
     return model.project_rows(t, h, y, sets, args)
 
@@ -417,6 +425,15 @@ def _reached(y0, r0, r1, da0, h, w):
     # the start (third order), which the projection stops at the face.
     c = r1 - r0 - da0
     return y0 + h * w * (r0 + w * (0.5 * da0 + w * c / 3))
+
+
+def _stuck(y0, y1, p0, da0, h, w):
+    # A stick reached inside the step (a friction row moving at the start, held at the
+    # end): the flow from the start (second order: the reaction's own change is not in
+    # `da0`), held at the end's value from where it reaches it, instead of a cubic bent to
+    # arrive there with the stick's zero rate.
+    flow = y0 + h * w * (p0 + 0.5 * w * da0)
+    return jnp.clip(flow, jnp.minimum(y0, y1), jnp.maximum(y0, y1))
 
 
 def _left(y0, y1, r0, r1, da1, h, w):
