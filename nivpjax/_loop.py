@@ -342,8 +342,9 @@ def interpolate(sol: Solution, t_eval, model: Model | None = None, args=None):
     takes (`Model.projected_rate`: zero normal motion where a set holds a row at a
     face, the vector field's where it is free, a friction law's reaction added), and
     every value is projected back into its set (`Model.project_rows`, the last
-    operation: each output lies in its set exactly; not on a proximal map's rows, which
-    no set constrains): a cubic between two points of a box can overshoot it.
+    operation: each output is the projector's value, inside a box bit for bit; not on a
+    proximal map's rows, which no set constrains): a cubic between two points of a box
+    can overshoot it.
 
     A phase that begins or ends inside a step is read off the rates at its ends, per row.
     A row free at the start and held at the end reached its face inside the step: it
