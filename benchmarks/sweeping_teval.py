@@ -31,26 +31,27 @@ from ._common import time_once
 AMPLITUDE, OMEGA, T1 = 1.5, 1.3, 10.0
 
 
-def u_of(t):
-    return AMPLITUDE * np.sin(OMEGA * np.asarray(t, float))
+def u_of(t, amplitude=AMPLITUDE, omega=OMEGA):
+    return amplitude * np.sin(omega * np.asarray(t, float))
 
 
-def play_exact(t):
-    """z(t) of the sweeping process, from the play operator x = z + u of width 1: on each
-    monotone piece of u starting at t_k, x = max(x(t_k), u - 1) where u increases and
-    min(x(t_k), u + 1) where it decreases; x(0) = 0."""
+def play_exact(t, amplitude=AMPLITUDE, omega=OMEGA):
+    """z(t) of the sweeping process z' in -u' - N_[-1,1](z), u = amplitude sin(omega t),
+    z(0) = 0, from the play operator x = z + u of width 1: on each monotone piece of u
+    starting at t_k, x = max(x(t_k), u - 1) where u increases and min(x(t_k), u + 1) where
+    it decreases; x(0) = 0."""
     t = np.asarray(t, float)
-    # Extrema of u: 1.3 t = pi/2 + k pi.
-    k_max = int(np.ceil(OMEGA * max(float(t.max()), 0.0) / np.pi)) + 1
-    breaks = np.concatenate([[0.0], (np.pi / 2 + np.pi * np.arange(k_max)) / OMEGA])
+    # Extrema of u: omega t = pi/2 + k pi.
+    k_max = int(np.ceil(omega * max(float(t.max()), 0.0) / np.pi)) + 1
+    breaks = np.concatenate([[0.0], (np.pi / 2 + np.pi * np.arange(k_max)) / omega])
     x_at = [0.0]
     for k in range(len(breaks) - 1):
         up = k % 2 == 0
-        u_end = u_of(breaks[k + 1])
+        u_end = u_of(breaks[k + 1], amplitude, omega)
         x_at.append(max(x_at[-1], u_end - 1) if up else min(x_at[-1], u_end + 1))
     piece = np.clip(np.searchsorted(breaks, t, side="right") - 1, 0, len(breaks) - 2)
     xk = np.asarray(x_at)[piece]
-    u = u_of(t)
+    u = u_of(t, amplitude, omega)
     x = np.where(piece % 2 == 0, np.maximum(xk, u - 1), np.minimum(xk, u + 1))
     return x - u
 

@@ -33,6 +33,8 @@ class Model(eqx.Module):
     - `has_algebraic`: whether any row is algebraic (static).
     - `has_selections`: whether any algebraic row is a selection row (static; see
       `selection_rows`).
+    - `has_held_rows`: whether a set can hold a differential row at a face (static; not a
+      proximal map's rows, nor a contact's: see `nivpjax._stepper.departure`).
     - `unit_mass`: whether $A$ is the identity on the differential rows and zero on the
       algebraic ones (static; `Model.build` reads it off a concrete $A$). Products with
       $A$ and solves with its differential block are then masks.
@@ -47,6 +49,7 @@ class Model(eqx.Module):
     has_algebraic: bool = eqx.field(static=True, default=False)
     unit_mass: bool = eqx.field(static=True, default=False)
     has_selections: bool = eqx.field(static=True, default=False)
+    has_held_rows: bool = eqx.field(static=True, default=False)
 
     @classmethod
     def build(cls, vector_field, projector, mass_matrix, algebraic, **kwargs) -> "Model":
@@ -72,6 +75,7 @@ class Model(eqx.Module):
             has_algebraic=bool(algebraic.any()),
             unit_mass=unit,
             has_selections=bool(selections.any()),
+            has_held_rows=_has_held_rows(projector, algebraic),
             **kwargs,
         )
 
@@ -632,3 +636,13 @@ class Model(eqx.Module):
         leaving a bound, friction sticking or slipping, a diode switching, a contact
         opening or closing), see `AbstractProjector.switched`."""
         return self.projector.switched(self._context(t1, h, y0, y1, args))
+
+
+def _has_held_rows(projector, algebraic) -> bool:
+    # Differential rows a set can hold at a face (not a proximal map's rows, not a
+    # contact's, whose velocities jump): see `nivpjax._stepper.departure`.
+    n = algebraic.shape[0]
+    if projector.has_event_time:
+        return False
+    rows = np.asarray(projector.acts_on(n), bool) & ~algebraic
+    return bool((rows & ~np.asarray(projector.weighed_rows(n), bool)).any())

@@ -17,6 +17,8 @@ STEPPERS = {
     "Bathe": nj.Bathe,
     "EmbeddedBETR": nj.EmbeddedBETR,
 }
+
+
 def _catch_up(t):
     # The play operator by its catch-up algorithm on a fine grid: exact at grid points
     # wherever u is monotone between them, an independent check of the closed form.

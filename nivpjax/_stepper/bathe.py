@@ -6,6 +6,7 @@ import jax.numpy as jnp
 from .._nonlinear import AbstractNonlinearSolver
 from .._solution import StepStats
 from .base import AbstractStepper, Stage, StepOutput, chained_stages, default_solver
+from .departure import departure_error
 
 
 def error_constant(gamma):
@@ -119,6 +120,8 @@ class Bathe(AbstractStepper):
         smooth = bathe_error(g, h, f0 + r0, f_mid + r_mid, f1 + r_b)
         split = 0.5 * (1 - g) * h * (f1 - f_mid) + 0.5 * g * h * (f_mid - f0)
         e = model.to_state(jnp.where(restart, split, smooth))
+        left = departure_error(model, t0, h, y0, y1, f0, f1, args)
+        e = jnp.where(jnp.abs(left) > jnp.abs(e), left, e)
         if model.has_impulses:
             # An impact inside the step (a contact closed by the end of the first stage,
             # or about to close, and bounced by the second from its start): charge its

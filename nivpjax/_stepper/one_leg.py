@@ -7,6 +7,7 @@ import jax.numpy as jnp
 from .._nonlinear import AbstractNonlinearSolver
 from .._projector import Identity
 from .base import AbstractStepper, StepOutput, default_solver, stats_of
+from .departure import departure_error
 
 
 def state_rate(model, t, y, F, y0, y1, h, switched, args):
@@ -177,9 +178,13 @@ class _AbstractTheta(AbstractStepper):
         f1 = model.f(t1, y1, args)
         reaction = model.reaction(multipliers)
         e = theta_error(model, self.theta, t0, h, y0, y1, f0, f1, reaction, args)
+        e = model.to_state(e)
+        if self.theta < 1.0:
+            left = departure_error(model, t0, h, y0, y1, f0, f1, args)
+            e = jnp.where(jnp.abs(left) > jnp.abs(e), left, e)
         return StepOutput(
             y1=y1,
-            y_error=model.to_state(e) + start_error,
+            y_error=e + start_error,
             multipliers=multipliers,
             stats=stats_of(sol),
         )
