@@ -147,7 +147,7 @@ MUTANTS = [
         "CoulombFriction's docstring: isotropic friction is the ball's Moreau decomposition "
         "with the stage's rho",
         (
-            "tests/test_friction_order.py::test_reactions_at_the_steps",
+            "tests/test_friction_order.py::test_reactions_at_the_steps[tr]",
             "tests/test_scenes_mechanics.py::test_block_on_plane",
         ),
     ),
@@ -290,7 +290,8 @@ MUTANTS = [
         (
             TN + "test_newton_line_search_after_the_watchdog",
             TN + "test_relay_step",
-            "tests/test_filippov.py::test_invariant_or_failure_code",
+            "tests/test_filippov.py::test_invariant_or_failure_code[bathe-newton]",
+            "tests/test_filippov.py::test_invariant_or_failure_code[tr-newton]",
         ),
     ),
     Mutant(
@@ -304,7 +305,7 @@ MUTANTS = [
             TN + "test_relay_step",
             TN + "test_contact_step_resting",
             TN + "test_soc_step_sticking",
-            "tests/test_hard_cases.py::test_random_vi",
+            "tests/test_hard_cases.py::test_random_vi[newton]",
         ),
     ),
     Mutant(
@@ -359,7 +360,7 @@ MUTANTS = [
         (
             TN + "test_contact_step_resting",
             TN + "test_relay_step",
-            "tests/test_hard_cases.py::test_ball_resting_contact_carries_weight",
+            "tests/test_hard_cases.py::test_ball_resting_contact_carries_weight[bathe-vi]",
         ),
     ),
     Mutant(
@@ -372,7 +373,7 @@ MUTANTS = [
         (
             TN + "test_relay_step",
             TN + "test_soc_step_sliding",
-            "tests/test_hard_cases.py::test_random_vi",
+            "tests/test_hard_cases.py::test_random_vi[vi]",
         ),
     ),
     Mutant(
@@ -387,7 +388,7 @@ MUTANTS = [
             TN + "test_relay_step",
             TN + "test_soc_step_sliding",
             TN + "test_soc_step_sticking",
-            "tests/test_hard_cases.py::test_random_vi",
+            "tests/test_hard_cases.py::test_random_vi[vi]",
         ),
     ),
     Mutant(
@@ -517,8 +518,9 @@ MUTANTS = [
         "at a jump of the rate",
         (
             TE + "test_estimate_sees_an_equation_row",
-            "tests/test_filippov.py::test_invariant_or_failure_code",
-            "tests/test_hard_cases.py::test_sliding_mode_control_without_chattering",
+            "tests/test_filippov.py::test_invariant_or_failure_code[tr-newton]",
+            "tests/test_filippov.py::test_invariant_or_failure_code[theta0.7-newton]",
+            "tests/test_hard_cases.py::test_sliding_mode_control_without_chattering[tr]",
         ),
     ),
     Mutant(
@@ -532,8 +534,10 @@ MUTANTS = [
         (
             TE + "test_estimate_tracks_local_error",
             TE + "test_estimate_sees_an_equation_row",
-            "tests/test_filippov.py::test_invariant_or_failure_code",
-            "tests/test_filippov_trust.py::test_forced_relay_leaves_sliding",
+            "tests/test_filippov.py::test_invariant_or_failure_code[tr-newton]",
+            "tests/test_filippov.py::test_invariant_or_failure_code[theta0.7-newton]",
+            "tests/test_filippov_trust.py::test_forced_relay_leaves_sliding[tr-box-1.3-2.0]",
+            "tests/test_filippov_trust.py::test_forced_relay_leaves_sliding[tr-sign-1.3-2.0]",
         ),
     ),
     Mutant(
@@ -546,8 +550,8 @@ MUTANTS = [
         "along an equivalent control is seen as moving",
         (
             TE + "test_estimate_tracks_local_error",
-            "tests/test_filippov_trust.py::test_forced_relay_leaves_sliding",
-            "tests/test_hard_cases.py::test_sliding_mode_control_without_chattering",
+            "tests/test_filippov_trust.py::test_forced_relay_leaves_sliding[tr-box-1.3-2.0]",
+            "tests/test_hard_cases.py::test_sliding_mode_control_without_chattering[tr]",
         ),
     ),
     Mutant(
@@ -574,7 +578,8 @@ MUTANTS = [
         (
             "tests/test_scenes_switching.py::test_relay_reaching_time",
             "tests/test_scenes_switching.py::test_relay_filippov_sliding",
-            "tests/test_filippov_trust.py::test_forced_relay_leaves_sliding",
+            "tests/test_filippov_trust.py::test_forced_relay_leaves_sliding[be-box-1.3-2.0]",
+            "tests/test_filippov_trust.py::test_forced_relay_leaves_sliding[tr-box-1.3-2.0]",
         ),
     ),
     Mutant(
@@ -587,7 +592,8 @@ MUTANTS = [
         "lands on it too early",
         (
             "tests/test_scenes_switching.py::test_relay_reaching_time",
-            "tests/test_filippov.py::test_invariant_or_failure_code",
+            "tests/test_filippov.py::test_invariant_or_failure_code[be-newton]",
+            "tests/test_filippov.py::test_invariant_or_failure_code[be-vi]",
         ),
     ),
     Mutant(
@@ -601,7 +607,8 @@ MUTANTS = [
         (
             TE + "test_estimate_tracks_local_error",
             TE + "test_estimate_sees_an_equation_row",
-            "tests/test_filippov.py::test_invariant_or_failure_code",
+            "tests/test_filippov.py::test_invariant_or_failure_code[be-newton]",
+            "tests/test_filippov.py::test_invariant_or_failure_code[be-vi]",
         ),
     ),
     Mutant(
@@ -630,7 +637,10 @@ MUTANTS = [
         "F = jnp.where(model.weighed, f + r, f)",
         "F = f",
         "_effective: on weighed rows F = f + r, the law's reaction at each end (slip weakening)",
-        ("tests/test_friction_order.py::test_adaptive_as_accurate_as_the_smooth_field",),
+        (
+            "tests/test_friction_order.py::test_adaptive_as_accurate_as_the_smooth_field[weakening-tr]",
+            "tests/test_friction_order.py::test_adaptive_as_accurate_as_the_smooth_field[disk-tr]",
+        ),
     ),
     Mutant(
         "friction_reaction_derivative_dropped",
@@ -640,7 +650,10 @@ MUTANTS = [
         "return F, rate, flow_derivative(model, t, y, rate, args)",
         "_effective's comment: F_dot includes the reaction's derivative along the flow (TR's "
         "estimate was blind to it: 2.2x the smooth field's error)",
-        ("tests/test_friction_order.py::test_adaptive_as_accurate_as_the_smooth_field",),
+        (
+            "tests/test_friction_order.py::test_adaptive_as_accurate_as_the_smooth_field[weakening-tr]",
+            "tests/test_friction_order.py::test_adaptive_as_accurate_as_the_smooth_field[disk-tr]",
+        ),
     ),
     Mutant(
         "bathe_error_constant",
@@ -669,9 +682,9 @@ MUTANTS = [
         "the comment: reactions linear in time matching the stage averages (a body stuck "
         "under a slowly varying load has exactly zero estimate)",
         (
-            "tests/test_hard_cases.py::test_stick_slip_under_slowly_growing_load",
-            "tests/test_friction_order.py::test_second_order_at_fixed_steps",
-            "tests/test_hard_cases.py::test_ball_resting_contact_carries_weight",
+            "tests/test_hard_cases.py::test_stick_slip_under_slowly_growing_load[bathe]",
+            "tests/test_friction_order.py::test_second_order_at_fixed_steps[disk-bathe]",
+            "tests/test_hard_cases.py::test_ball_resting_contact_carries_weight[bathe]",
         ),
     ),
     Mutant(
@@ -684,7 +697,8 @@ MUTANTS = [
         "first stage, gamma h / 2 (f_mid - f0)",
         (
             "tests/test_scenes_switching.py::test_relay_reaching_time",
-            "tests/test_filippov.py::test_invariant_or_failure_code",
+            "tests/test_filippov.py::test_invariant_or_failure_code[bathe-newton]",
+            "tests/test_filippov.py::test_invariant_or_failure_code[bathe-vi]",
             "tests/test_scenes_mechanics.py::test_slider_stick_slip",
         ),
     ),
@@ -697,7 +711,8 @@ MUTANTS = [
         "Bathe's docstring: after a change of face the backward difference would "
         "extrapolate across the jump of the rate: restart",
         (
-            "tests/test_filippov.py::test_invariant_or_failure_code",
+            "tests/test_filippov.py::test_invariant_or_failure_code[bathe-newton]",
+            "tests/test_filippov.py::test_invariant_or_failure_code[bathe-vi]",
             "tests/test_scenes_switching.py::test_relay_filippov_sliding",
             "tests/test_scenes_mechanics.py::test_slider_stick_slip",
         ),
@@ -720,8 +735,10 @@ MUTANTS = [
         "the comment: a transient landing has TR - BE ~ 0 (measured: a Filippov spiral's "
         "invariant off by 1.3e-2 at rtol 1e-3)",
         (
-            "tests/test_filippov.py::test_invariant_or_failure_code",
-            "tests/test_filippov_trust.py::test_spiral_through_zeno_point",
+            "tests/test_filippov.py::test_invariant_or_failure_code[betr-newton]",
+            "tests/test_filippov.py::test_invariant_or_failure_code[betr-vi]",
+            "tests/test_filippov_trust.py::test_spiral_through_zeno_point[betr-10.0-0.1]",
+            "tests/test_filippov_trust.py::test_spiral_through_zeno_point[betr-300.0-0.02]",
         ),
     ),
     Mutant(
@@ -838,7 +855,8 @@ MUTANTS = [
         "the comment: an attempt that crossed the event in its last EVENT_SKIP is left to the "
         "error-controlled factor (measured: 7936 rejections of one step, VI sliding landing)",
         (
-            "tests/test_filippov.py::test_invariant_or_failure_code",
+            "tests/test_filippov.py::test_invariant_or_failure_code[bathe-vi]",
+            "tests/test_filippov.py::test_invariant_or_failure_code[be-vi]",
             "tests/test_scenes_switching.py::test_super_twisting_finite_time_sliding",
         ),
     ),

@@ -38,6 +38,7 @@ import shutil
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
@@ -86,9 +87,9 @@ def check(mutant: Mutant, root: Path = ROOT) -> str:
     return text.replace(mutant.original, mutant.replacement)
 
 
-def scratch_copy(dest: Path) -> None:
+def scratch_copy(dest: Path, root: Path = ROOT) -> None:
     for name in COPY:
-        src = ROOT / name
+        src = root / name
         if src.is_dir():
             shutil.copytree(src, dest / name, ignore=IGNORE)
         elif src.is_file():
@@ -143,11 +144,11 @@ def outcome(rc) -> str:
     return f"harness error (pytest exit {rc})"
 
 
-def run_mutant(mutant: Mutant, full: bool, timeout: float, log) -> dict:
-    mutated = check(mutant)
+def run_mutant(mutant: Mutant, full: bool, timeout: float, log, snapshot: Path) -> dict:
+    mutated = check(mutant, snapshot)
     with tempfile.TemporaryDirectory(prefix="nivpjax-mutant-") as tmp:
         scratch = Path(tmp)
-        scratch_copy(scratch)
+        scratch_copy(scratch, snapshot)
         (scratch / mutant.file).write_text(mutated)
         rc, seconds, tail = run_tests(scratch, mutant.tests, full, timeout)
     row = dict(
@@ -163,7 +164,7 @@ def run_mutant(mutant: Mutant, full: bool, timeout: float, log) -> dict:
     return row
 
 
-def baselines(mutants, full: bool, timeout: float, log) -> dict:
+def baselines(mutants, full: bool, timeout: float, log, snapshot: Path) -> dict:
     """area -> (passed, seconds, tail) for the unmutated copy."""
     areas = {}
     for m in mutants:
@@ -174,7 +175,7 @@ def baselines(mutants, full: bool, timeout: float, log) -> dict:
     out = {}
     with tempfile.TemporaryDirectory(prefix="nivpjax-baseline-") as tmp:
         scratch = Path(tmp)
-        scratch_copy(scratch)
+        scratch_copy(scratch, snapshot)
         where = imported_from(scratch)
         if not where.startswith(str(scratch)):
             raise SystemExit(f"the scratch copy does not shadow the installed package: {where}")
@@ -314,7 +315,12 @@ def main(argv=None):
         print(msg, flush=True)
 
     t = time.perf_counter()
-    base = {} if a.no_baseline else baselines(mutants, a.full, a.timeout, log)
+    # One snapshot of the tree when the run starts: edits made while it runs (a new test
+    # for a survivor) do not leak into later mutants' copies.
+    snapshot_dir = tempfile.TemporaryDirectory(prefix="nivpjax-snapshot-")
+    snapshot = Path(snapshot_dir.name)
+    scratch_copy(snapshot)
+    base = {} if a.no_baseline else baselines(mutants, a.full, a.timeout, log, snapshot)
     area_ok = {area: ok for area, (ok, _, _) in base.items()}
 
     def one(m):
@@ -327,10 +333,18 @@ def main(argv=None):
                 outcome="baseline failed",
                 seconds=0.0,
             )
-        return run_mutant(m, a.full, a.timeout, log)
+        row = run_mutant(m, a.full, a.timeout, log, snapshot)
+        with lock:  # the table so far, so that an interrupted run leaves its results
+            done[m.name] = row
+            partial = [done[n.name] for n in mutants if n.name in done]
+            if not a.only:
+                write(partial, a.out, a.full, base)
+        return row
 
+    done, lock = {}, threading.Lock()
     with ThreadPoolExecutor(max_workers=max(1, a.jobs)) as pool:
         rows = list(pool.map(one, mutants))
+    snapshot_dir.cleanup()
     if a.only:  # merge into the last full table: rerun mutants replace their rows
         rows, base = merge(rows, base, a.out)
     write(rows, a.out, a.full, base)
