@@ -224,3 +224,15 @@ def test_pid_error_order_overrides_the_steppers():
         accept, factor, _ = ours.adapt(info, state)
         assert not bool(accept)
         assert float(factor) == ours.nonlinear_factor
+
+
+def test_masked_error_norm_is_the_rms_over_the_unmasked_rows():
+    from nivpjax._norms import scaled_rms_norm
+
+    e, y0, y1 = jnp.array([3e-4, 1.0, -2e-4, 5.0]), jnp.ones(4), jnp.full(4, 2.0)
+    mask = jnp.array([True, False, True, False])
+    rows = np.flatnonzero(mask)
+    masked = scaled_rms_norm(e, y0, y1, 1e-3, 1e-6, mask)
+    alone = scaled_rms_norm(e[rows], y0[rows], y1[rows], 1e-3, 1e-6)
+    np.testing.assert_allclose(masked, alone, rtol=1e-15)
+    assert float(scaled_rms_norm(e, y0, y1, 1e-3, 1e-6, jnp.zeros(4, bool))) == 0.0
