@@ -749,6 +749,7 @@ MUTANTS = [
         "y_error = (half2.y1 - full.y1) / 2.0**p",
         "Richardson's docstring: the error of the two half steps is (y_h/2,h/2 - y_h)/(2^p - 1)",
         (
+            TE + "test_richardson_estimate_tracks_local_error",
             "tests/test_solve.py::test_adaptive_meets_tolerance",
             TE + "test_estimate_tracks_local_error",
         ),
@@ -879,6 +880,7 @@ MUTANTS = [
         "the comment: land on t1 rather than leave a remainder below h_min (a step of a few "
         "ulps after fixed steps)",
         (
+            "tests/test_solve.py::test_fixed_steps_land_on_t1_without_a_round_off_step",
             "tests/test_solve.py::test_order_of_convergence",
             "tests/test_solve.py::test_t_eval_and_buffers",
             "tests/test_solve.py::test_attempt_log",
@@ -1029,7 +1031,11 @@ MUTANTS = [
         'kw["alpha0"] = float(sopts["rho0"])',
         'kw["alpha_max"] = float(sopts["rho0"])',
         "the drop-in's option translation: the reference's rho0 is the VI's initial step",
-        (TC + "test_defaults_are_the_reference_ones", TC + "test_spring_slider"),
+        (
+            TC + "test_given_options_arrive_where_the_reference_reads_them",
+            TC + "test_defaults_are_the_reference_ones",
+            TC + "test_spring_slider",
+        ),
     ),
     Mutant(
         "compat_gap_tol_sign",
@@ -1039,7 +1045,11 @@ MUTANTS = [
         "gap=lambda t, y, a: jnp.atleast_1d(gap(t, y)) + gap_tol,",
         "the drop-in's option translation: gap_tol shifts the contact (the reference "
         "enforces gap >= gap_tol)",
-        (TC + "test_bouncing_ball", TC + "test_defaults_are_the_reference_ones"),
+        (
+            TC + "test_bouncing_ball",
+            TC + "test_given_options_arrive_where_the_reference_reads_them",
+            TC + "test_defaults_are_the_reference_ones",
+        ),
     ),
     Mutant(
         "compat_method_order_off_by_one",
@@ -1049,7 +1059,10 @@ MUTANTS = [
         "error_order=None if order is None else int(order),",
         "the drop-in's option translation: the reference's method_order p controls with "
         "exponent 1/(p + 1)",
-        (TC + "test_defaults_are_the_reference_ones",),
+        (
+            TC + "test_given_options_arrive_where_the_reference_reads_them",
+            TC + "test_defaults_are_the_reference_ones",
+        ),
     ),
     Mutant(
         "compat_theta_default",
@@ -1076,6 +1089,9 @@ MUTANTS = [
         'kw["nu"] = float(sopts["L"])',
         'kw["kappa"] = float(sopts["L"])',
         "the drop-in's option translation: the reference's L is the VI's acceptance threshold nu",
-        (TC + "test_defaults_are_the_reference_ones",),
+        (
+            TC + "test_given_options_arrive_where_the_reference_reads_them",
+            TC + "test_defaults_are_the_reference_ones",
+        ),
     ),
 ]
