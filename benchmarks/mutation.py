@@ -263,6 +263,26 @@ def write(rows, stem: Path, full: bool, base) -> None:
             f"{tests} | {r['outcome']} | {r['seconds']} |"
         )
     stem.with_suffix(".md").write_text("\n".join(lines) + "\n")
+    if stem == RESULTS / "mutation" and DOCS_PAGE.is_file():
+        _update_docs(score, survived, full)
+
+
+DOCS_PAGE = ROOT / "docs" / "development" / "mutation.md"
+MARK, END = "<!-- mutation-score -->", "<!-- /mutation-score -->"
+
+
+def _update_docs(score, survived, full) -> None:
+    """The score line of the docs page, between its markers."""
+    text = DOCS_PAGE.read_text()
+    if MARK not in text or END not in text:
+        return
+    names = ", ".join(f"`{r['name']}`" for r in survived) or "none"
+    block = (
+        f"{MARK}\n**{score}** ({'the whole suite' if full else 'area tests'}, "
+        f"{time.strftime('%Y-%m-%d', time.gmtime())}). Survivors: {names}.\n{END}"
+    )
+    head, rest = text.split(MARK, 1)
+    DOCS_PAGE.write_text(head + block + rest.split(END, 1)[1])
 
 
 def main(argv=None):
