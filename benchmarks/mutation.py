@@ -208,7 +208,12 @@ def merge(rows, base, stem: Path):
         if r["name"].startswith(BASELINE):
             area = r["name"].removeprefix(BASELINE)
             base.setdefault(area, (r["outcome"] == "passed", float(r["seconds"]), ""))
-    merged = [new.pop(r["name"], r) for r in old if not r["name"].startswith(BASELINE)]
+    current = {m.name for m in MUTANTS}  # mutants since removed from the list drop out
+    merged = [
+        new.pop(r["name"], r)
+        for r in old
+        if not r["name"].startswith(BASELINE) and r["name"] in current
+    ]
     return merged + list(new.values()), base
 
 
