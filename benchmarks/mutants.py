@@ -869,6 +869,33 @@ MUTANTS = [
         ("tests/test_filippov_trust.py::test_second_order_sliding_is_not_checked_as_first_order",),
     ),
     Mutant(
+        "held_start_skipped",
+        "events",
+        "nivpjax/_held.py",
+        "return jax.lax.cond(jnp.any(held), start, lambda y0: y0, y0)",
+        "return y0",
+        "held_start's docstring: a held phase starts from its equivalent control (measured: "
+        "max_steps exhausted on a forced relay at rtol 1e-5 with the trapezoidal rule)",
+        (
+            "tests/test_filippov_trust.py::test_forced_relay_leaves_sliding[tr-box-1.3-2.0]",
+            "tests/test_filippov_trust.py::test_forced_relay_leaves_sliding[tr-sign-1.3-2.0]",
+        ),
+    ),
+    Mutant(
+        "held_one_sample",
+        "events",
+        "nivpjax/_held.py",
+        "SAMPLES = 8",
+        "SAMPLES = 1",
+        "the comment: an excursion of the equivalent control must span more than "
+        "1/(SAMPLES + 1) of a held step to be seen",
+        (
+            "tests/test_filippov_trust.py::test_forced_relay_leaves_sliding[be-box-2.5-3.0]",
+            "tests/test_filippov_trust.py::test_forced_relay_leaves_sliding[bathe-box-2.5-3.0]",
+            "tests/test_filippov_trust.py::test_forced_relay_leaves_sliding[tr-box-2.5-3.0]",
+        ),
+    ),
+    Mutant(
         "loop_last_step_leaves_remainder",
         "controllers",
         "nivpjax/_loop.py",
