@@ -751,6 +751,18 @@ def test_contact_impact_restitution(e):
     assert float(out[0]) == 0.001
 
 
+@pytest.mark.parametrize("e", [0.5, 1.0])
+def test_contact_restitution_acts_on_approach_only(e):
+    # A contact penetrated at the stage start but separating (u- = +1; active: its gap stays
+    # closed over the lookahead) whose candidate velocity points into the floor: Newton's
+    # law restores nothing of a separating velocity, so the velocity after is exactly 0
+    # (u+ >= -e u- would let the body move further in).
+    y_prev = jnp.array([-0.1, 1.0])
+    z = jnp.array([-0.1, -3.0])
+    out = _floor(e)(z, context(z, y_prev=y_prev, h=H))
+    assert float(out[1]) == 0.0
+
+
 _floor_fns = jacobian_fns(lambda z, y_prev: _floor(0.5)(z, context(z, y_prev=y_prev, h=H)), 0)
 
 
