@@ -59,9 +59,10 @@ MUTANTS = [
         P + "box.py",
         "return jnp.any((z0 <= 0) != (z1 <= 0))",
         "return jnp.any((z0 < 0) != (z1 < 0))",
-        "NonNegative.switched: a component that became zero changed face (a diode turning "
-        "off lands exactly on 0)",
+        "NonNegative.switched's docstring: a component became zero or positive (a clip lands "
+        "exactly on 0)",
         (
+            TP + "test_switched_sees_a_component_landing_on_a_bound",
             "tests/test_scenes_switching.py::test_rectifier_conduction_intervals",
             TS + "test_rectifier_derivative_after_a_step_over_the_turn_off",
         ),

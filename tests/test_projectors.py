@@ -751,6 +751,27 @@ def test_contact_impact_restitution(e):
     assert float(out[0]) == 0.001
 
 
+def test_switched_sees_a_component_landing_on_a_bound():
+    # The faces of a box are its bounds and its interior; a clip lands a component exactly
+    # on a bound (a diode's current turning off is 0.0): that is a change of face, and so
+    # are leaving a bound and moving between bounds. Staying on one is not.
+    box, orthant = nv.Box(-1.0, 1.0), nv.NonNegative()
+    cases = [
+        (orthant, [1.0], [0.0], True),
+        (orthant, [0.0], [0.5], True),
+        (orthant, [0.0], [0.0], False),
+        (orthant, [0.3], [0.5], False),
+        (box, [0.2], [1.0], True),
+        (box, [-1.0], [1.0], True),
+        (box, [1.0], [1.0], False),
+        (box, [0.2], [-0.5], False),
+    ]
+    for projector, before, after, switched in cases:
+        z = jnp.asarray(after)
+        ctx = context(z, y_prev=before, y_iter=after)
+        assert bool(projector.switched(ctx)) == switched, (projector, before, after)
+
+
 @pytest.mark.parametrize("e", [0.5, 1.0])
 def test_contact_restitution_acts_on_approach_only(e):
     # A contact penetrated at the stage start but separating (u- = +1; active: its gap stays
