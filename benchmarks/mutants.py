@@ -274,7 +274,10 @@ MUTANTS = [
         "tau = h * s0 / jnp.where(approaching, -ds, 1.0)",
         "tau = 0.5 * h * s0 / jnp.where(approaching, -ds, 1.0)",
         "secant_crossing's docstring: the zero of the secant through the two end values",
-        (TEV + "test_relay_sliding_entry_is_predicted_from_the_rates",),
+        (
+            TEV + "test_secant_crossing_is_the_zero_of_the_secant",
+            TEV + "test_relay_sliding_entry_is_predicted_from_the_rates",
+        ),
     ),
     Mutant(
         "hermite_excursion_c2",
@@ -309,6 +312,7 @@ MUTANTS = [
         "d = jnp.where(ok, d, g)",
         "SemismoothNewton's docstring: a singular Newton system falls back to d = -G(y)",
         (
+            TN + "test_singular_newton_system_falls_back_to_the_projection_step",
             TN + "test_relay_step",
             TN + "test_contact_step_resting",
             TN + "test_soc_step_sticking",

@@ -364,3 +364,13 @@ def test_small_solve_flags_singular_systems_and_batches():
     xs, oks = jax.vmap(_SMALL_SOLVE)(As, bs)
     assert bool(jnp.all(oks))
     np.testing.assert_allclose(xs, np.linalg.solve(As, bs[..., None])[..., 0], rtol=1e-10)
+
+
+def test_singular_newton_system_falls_back_to_the_projection_step():
+    # G(y) = y^3 - 1 (identity projector, rho = 1) from y = 0, where the Newton matrix
+    # 3 y^2 is singular: the step falls back to d = -G(0) = 1, which lands on the root.
+    solver = nj.SemismoothNewton(rtol=1e-12, atol=1e-12)
+    sol = solver.solve(lambda y: y**3 - 1.0, lambda z, y, rho: z, 1.0, jnp.zeros(1))
+    assert sol.result == nj.RESULTS.successful
+    assert int(sol.iterations) == 1
+    assert float(sol.value[0]) == 1.0
