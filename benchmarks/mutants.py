@@ -448,7 +448,11 @@ MUTANTS = [
         "return max(float(rtol), 8 * eps), max(float(atol), 8 * eps)",
         "return float(rtol), float(atol)",
         "effective_tolerances: a float32 solve asked for 1e-12 would otherwise never converge",
-        (TN + "test_float32_relay", "tests/test_solve.py::test_float32"),
+        (
+            TN + "test_float32_tolerances_are_clamped_to_its_resolution",
+            TN + "test_float32_relay",
+            "tests/test_solve.py::test_float32",
+        ),
     ),
     # ---------------------------------------------------------- implicit-function gradients
     Mutant(

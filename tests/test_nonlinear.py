@@ -326,6 +326,20 @@ def test_float32_relay():
     np.testing.assert_allclose(sol.value, [0.0, 0.8], atol=1e-5)
 
 
+def test_float32_tolerances_are_clamped_to_its_resolution():
+    # y + sin(y) / 2 = c componentwise: float32 evaluates G to a few 1e-8 relative, above the
+    # default rtol 1e-8 / atol 1e-10 (clamped to 8 eps); without the clamp no iterate meets
+    # the test. Both solvers converge to the float64 solution.
+    c = jnp.linspace(1.0, 3.0, 8)
+    exact = NEWTON.solve(lambda y: y + 0.5 * jnp.sin(y) - c, lambda z, y, rho: z, 1.0, c).value
+    for solver in (nj.SemismoothNewton(), nj.FixedPointVI()):
+        c32 = c.astype(jnp.float32)
+        sol = solver.solve(lambda y: y + 0.5 * jnp.sin(y) - c32, lambda z, y, rho: z, 0.5, c32)
+        assert sol.value.dtype == jnp.float32
+        assert sol.result == nj.RESULTS.successful, solver
+        np.testing.assert_allclose(sol.value, exact, rtol=5e-5)  # 8 eps x the contraction
+
+
 _SMALL_SOLVE = jax.jit(lambda A, b: nj._linalg.solve(A, b))
 
 
