@@ -814,7 +814,11 @@ MUTANTS = [
         "factor = jnp.where(ok, factor, self.nonlinear_factor)",
         "factor = jnp.where(ok, factor, 1.0)",
         "AbstractController's docstring: failed nonlinear solves are rejected and shrunk",
-        ("tests/test_controller_policy.py", "tests/test_solve.py::test_h_min_reported"),
+        (
+            "tests/test_controller_policy.py::test_pid_error_order_overrides_the_steppers",
+            "tests/test_controller_policy.py",
+            "tests/test_solve.py::test_h_min_reported",
+        ),
     ),
     Mutant(
         "pid_error_order_override_ignored",
@@ -823,7 +827,11 @@ MUTANTS = [
         "k = info.error_order if self.error_order is None else self.error_order",
         "k = info.error_order",
         "PIDController: error_order overrides the stepper's (the drop-in's method_order)",
-        (TC + "test_defaults_are_the_reference_ones", "tests/test_controller_policy.py"),
+        (
+            "tests/test_controller_policy.py::test_pid_error_order_overrides_the_steppers",
+            TC + "test_defaults_are_the_reference_ones",
+            "tests/test_controller_policy.py",
+        ),
     ),
     Mutant(
         "pid_initial_step_guess",
@@ -842,6 +850,7 @@ MUTANTS = [
         "count = mask.size",
         "scaled_rms_norm's docstring: the RMS over the unmasked components",
         (
+            "tests/test_controller_policy.py::test_masked_error_norm_is_the_rms_over_the_unmasked_rows",
             "tests/test_controller_policy.py",
             "tests/test_solve.py::test_dae_mass_matrix",
             TE + "test_estimate_sees_an_equation_row",
