@@ -999,6 +999,7 @@ MUTANTS = [
         "return self.normals(t, y, args).T",
         "Contact: the impulse map is M^-1 W (a stack of balls of different masses)",
         (
+            "tests/test_scenes_mechanics.py::test_contact_impulses_follow_the_inverse_mass",
             "tests/test_scenes_mechanics.py::test_stack_at_rest_carries_weight",
             "tests/test_scenes_mechanics.py::test_stack_drop_ends_stacked",
         ),
