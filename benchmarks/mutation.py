@@ -208,12 +208,14 @@ def merge(rows, base, stem: Path):
         if r["name"].startswith(BASELINE):
             area = r["name"].removeprefix(BASELINE)
             base.setdefault(area, (r["outcome"] == "passed", float(r["seconds"]), ""))
-    current = {m.name for m in MUTANTS}  # mutants since removed from the list drop out
+    current = {m.name: m for m in MUTANTS}  # mutants since removed from the list drop out
     merged = [
         new.pop(r["name"], r)
         for r in old
         if not r["name"].startswith(BASELINE) and r["name"] in current
     ]
+    for r in merged:  # the reasons as the list now states them (e.g. "equivalent: ...")
+        r["reason"] = current[r["name"]].reason
     return merged + list(new.values()), base
 
 
