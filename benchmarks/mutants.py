@@ -487,7 +487,9 @@ MUTANTS = [
         "J = jax.jacfwd(g)(jnp.zeros_like(b))",
         "J = jax.jacfwd(g)(b)",
         "_tangent_solve's comment: the Jacobian is taken at zero so that nothing but the solve "
-        "touches b (reverse mode transposes it in b)",
+        "touches b (reverse mode transposes it in b); SURVIVED the reverse-mode gradient tests: "
+        "g is linear, so its Jacobian at b equals that at 0 and JAX transposes it anyway (the "
+        "comment's reason is not reproduced; equivalent here)",
         (TN + "test_gradient_relay_sliding", TN + "test_gradient_soc_sliding_matches_fd"),
     ),
     Mutant(
