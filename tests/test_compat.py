@@ -299,3 +299,69 @@ def test_defaults_are_the_reference_ones(monkeypatch):
     for name, (mine, other) in pairs.items():
         expected = DEFAULTS_THAT_DIFFER.get(name, (other, other))
         assert (float(mine), float(other)) == pytest.approx(expected, rel=1e-12), name
+
+
+def test_given_options_arrive_where_the_reference_reads_them(monkeypatch):
+    """Option by option, a value other than the default reaches the field that means what
+    the reference's option means (its own objects, built from the same options, give the
+    expected values): the translation, not only the defaults."""
+    ref = pytest.importorskip("solve_nivp")
+    identity = ref.IdentityProjection()
+    vi_opts = dict(tol=3e-9, max_iter=77, rho0=0.37, L=0.55)
+    newton_opts = dict(tol=2e-9, max_iter=33, ls_c1=3e-4, ls_beta=0.3, max_backtracks=7)
+    ref_vi = ref.ImplicitEquationSolver(
+        method="VI", proj=identity, component_slices=[slice(0, 1)], **vi_opts
+    )
+    newton_name = "semismooth_newton"
+    ref_newton = ref.ImplicitEquationSolver(method=newton_name, proj=identity, **newton_opts)
+    vi = _handed_to_solve(monkeypatch, solver_opts=vi_opts)["stepper"].solver
+    seen = _handed_to_solve(monkeypatch, solver=newton_name, solver_opts=newton_opts)
+    newton = seen["stepper"].solver
+    pairs = {
+        "tol": (vi.rtol, ref_vi.tol),
+        "tol (atol)": (vi.atol, ref_vi.tol),
+        "max_iter": (vi.max_steps, ref_vi.max_iter),
+        "rho0": (vi.alpha0, ref_vi.rho0),
+        "L": (vi.nu, ref_vi.L),
+        "newton tol": (newton.rtol, ref_newton.tol),
+        "newton max_iter": (newton.max_steps, ref_newton.max_iter),
+        "ls_c1": (newton.sigma, ref_newton.ls_c1),
+        "ls_beta": (newton.beta, ref_newton.ls_beta),
+        "max_backtracks": (newton.max_backtracks, ref_newton.max_backtracks),
+    }
+    # adaptive_opts: the reference sets its stepper's attributes to the given values; a
+    # method_order p makes it control with the error order p + 1 and the PI exponent
+    # 0.7 / (p + 1) on the current error.
+    aopts = dict(h_up=3.0, h_down=0.4, safety=0.8, h_min=1e-9, h_max=0.5, method_order=3)
+    seen = _handed_to_solve(monkeypatch, adaptive_opts=aopts)
+    ctrl = seen["controller"]
+    k = aopts["method_order"] + 1
+    pairs |= {
+        "h_up": (ctrl.factormax, aopts["h_up"]),
+        "h_down": (ctrl.factormin, aopts["h_down"]),
+        "safety": (ctrl.safety, aopts["safety"]),
+        "h_min": (ctrl.h_min, aopts["h_min"]),
+        "h_max": (ctrl.h_max, aopts["h_max"]),
+        "method_order": (ctrl.error_order, k),
+        "use_PI current": ((ctrl.pcoeff + ctrl.icoeff) / ctrl.error_order, 0.7 / k),
+    }
+    theta = _handed_to_solve(monkeypatch, method="theta", integrator_opts=dict(theta=0.6))
+    bathe = _handed_to_solve(monkeypatch, integrator_opts=dict(gamma=0.3))
+    pairs |= {
+        "theta": (theta["stepper"].theta, ref.ThetaMethod(solver=ref_vi, theta=0.6).theta),
+        "gamma": (bathe["stepper"].gamma, 0.3),
+    }
+    for name, (mine, other) in pairs.items():
+        assert float(mine) == pytest.approx(float(other), rel=1e-12), name
+    # gap_tol: the reference's contact is active where gap <= gap_tol; ours where the
+    # translated gap is <= 0. A state between 0 and gap_tol is active in both.
+    tol = 1e-3
+    contact = _handed_to_solve(
+        monkeypatch,
+        projection="unilateral",
+        projection_opts=ball_opts(jnp) | dict(gap_tol=tol),
+    )["projector"]
+    contact = contact.blocks[0][1] if isinstance(contact, nj.BlockProjector) else contact
+    for height, active in [(0.5 * tol, True), (2 * tol, False), (-0.5 * tol, True)]:
+        gap = float(contact.gap(0.0, jnp.array([0.0, height]), None)[0])
+        assert (gap <= 0) == active, (height, gap)

@@ -187,3 +187,52 @@ def test_bad_input():
         nv.PolicyController(nv.IntegralPolicy(2), factormin=2.0)
     with pytest.raises(TypeError, match="features"):
         nv.PolicyController(nv.IntegralPolicy(2), features="x")
+
+
+def test_pid_error_order_overrides_the_steppers():
+    # `error_order` given to the controller replaces the stepper's (info.error_order) in the
+    # exponents: its factors are diffrax's with that order, not with the stepper's.
+    import diffrax
+
+    ours = nv.PIDController(rtol=1e-3, atol=1.0, event_prediction=False, error_order=2)
+    theirs = diffrax.PIDController(rtol=1e-3, atol=1.0)
+    zero = jnp.zeros(1)
+    stats = nv.StepStats(jnp.array(1), jnp.array(0.0), nv.RESULTS.successful)
+    state = (jnp.array(1.0), jnp.array(1.0), jnp.array(False))
+    error = jnp.array([1e-3])
+    info = nv.StepInfo(
+        t0=jnp.array(0.0),
+        h=jnp.array(1.0),
+        t1=jnp.array(10.0),
+        y0=zero,
+        y1=zero,
+        y_error=error,
+        error_order=3,
+        stats=stats,
+        error_mask=jnp.ones(1, bool),
+        violation=jnp.array(0.0),
+        next_event=jnp.array(jnp.inf),
+    )
+    _, factor, _ = ours.adapt(info, state)
+    _, t0, t1, *_ = theirs.adapt_step_size(0.0, 1.0, zero, zero, None, error, 2, state)
+    np.testing.assert_allclose(factor, t1 - t0, rtol=1e-13)
+    # And a failed nonlinear solve is rejected and shrinks by `nonlinear_factor`, whatever
+    # its error estimate says.
+    failed = nv.StepStats(jnp.array(50), jnp.array(1.0), nv.RESULTS.nonlinear_max_steps_reached)
+    for e in (1e-8, 1e-3, 10.0):
+        info = eqx.tree_at(lambda i: (i.stats, i.y_error), info, (failed, jnp.array([e])))
+        accept, factor, _ = ours.adapt(info, state)
+        assert not bool(accept)
+        assert float(factor) == ours.nonlinear_factor
+
+
+def test_masked_error_norm_is_the_rms_over_the_unmasked_rows():
+    from nivpjax._norms import scaled_rms_norm
+
+    e, y0, y1 = jnp.array([3e-4, 1.0, -2e-4, 5.0]), jnp.ones(4), jnp.full(4, 2.0)
+    mask = jnp.array([True, False, True, False])
+    rows = np.flatnonzero(mask)
+    masked = scaled_rms_norm(e, y0, y1, 1e-3, 1e-6, mask)
+    alone = scaled_rms_norm(e[rows], y0[rows], y1[rows], 1e-3, 1e-6)
+    np.testing.assert_allclose(masked, alone, rtol=1e-15)
+    assert float(scaled_rms_norm(e, y0, y1, 1e-3, 1e-6, jnp.zeros(4, bool))) == 0.0

@@ -84,6 +84,34 @@ def test_estimate_tracks_local_error(name, exact):
         assert abs(measured - order) <= 0.2, (measured, order)
 
 
+# Richardson step doubling around a scheme of order p propagates the two half steps and
+# estimates their error as (y_{h/2,h/2} - y_h)/(2^p - 1). (Its sign is the other way round
+# from the embedded estimates': exact minus computed. Only its norm is used.)
+RICHARDSON = {
+    "be": (nj.Richardson(nj.BackwardEuler(TIGHT)), 2),
+    "tr": (nj.Richardson(nj.Trapezoidal(TIGHT)), 3),
+}
+
+
+@pytest.mark.parametrize("name", list(RICHARDSON))
+def test_richardson_estimate_tracks_local_error(name, exact):
+    stepper, order = RICHARDSON[name]
+    assert stepper.error_order == order
+    step = jax.jit(lambda h: stepper.step(MODEL, jnp.asarray(T0), h, Y0, None))
+    true, est = [], []
+    for h in HS:
+        out = step(jnp.asarray(h))
+        error, estimate = np.asarray(out.y1) - exact[h], np.asarray(out.y_error)
+        cosine = error @ estimate / (np.linalg.norm(error) * np.linalg.norm(estimate))
+        assert cosine < -0.95, (h, error, estimate)  # the other sign, see above
+        true.append(np.linalg.norm(error))
+        est.append(np.linalg.norm(estimate))
+    ratio = np.array(est) / np.array(true)
+    assert 0.85 <= ratio[-1] <= 1.15, ratio  # asymptotically exact
+    measured = np.log2(est[-2] / est[-1])
+    assert abs(measured - order) <= 0.2, (measured, order)
+
+
 # An index-1 DAE: the half-wave rectifier while its diode conducts, i = (V sin wt - v)/R_s,
 # from a start far off the quasi-steady state (the fast mode R_s C = 1e-4 s dominates the
 # error). The current is an equation row: its rate must enter the estimate (the trapezoidal

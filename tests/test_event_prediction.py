@@ -259,3 +259,20 @@ def test_a_step_does_not_jump_over_a_conduction_pulse():
     assert sol.result == nj.RESULTS.successful
     v = float(np.asarray(sol.y_final)[0])
     assert abs(v - _bridge_reference(0.04)) < 1e-3
+
+
+def test_secant_crossing_is_the_zero_of_the_secant():
+    import jax.numpy as jnp
+
+    from nivpjax._projector.predict import secant_crossing
+
+    s0 = jnp.array([1.0, 1.0, -3.0, 1.0, 2.0])
+    s1 = jnp.array([-1.0, 0.5, -1.0, 2.0, 2.0])
+    h = 2.0
+    # inside the step, beyond it (approaching), beyond it from below, moving away, still
+    tau = np.asarray(secant_crossing(s0, s1, h))
+    expected = [1.0, 4.0, 3.0, np.inf, np.inf]
+    np.testing.assert_allclose(tau, expected, rtol=1e-15)
+    # The line through (0, s0) and (h, s1) vanishes there.
+    finite = np.isfinite(tau)
+    np.testing.assert_allclose((s0 + (s1 - s0) * tau / h)[finite], 0.0, atol=1e-15)

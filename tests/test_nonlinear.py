@@ -326,6 +326,20 @@ def test_float32_relay():
     np.testing.assert_allclose(sol.value, [0.0, 0.8], atol=1e-5)
 
 
+def test_float32_tolerances_are_clamped_to_its_resolution():
+    # y + sin(y) / 2 = c componentwise: float32 evaluates G to a few 1e-8 relative, above the
+    # default rtol 1e-8 / atol 1e-10 (clamped to 8 eps); without the clamp no iterate meets
+    # the test. Both solvers converge to the float64 solution.
+    c = jnp.linspace(1.0, 3.0, 8)
+    exact = NEWTON.solve(lambda y: y + 0.5 * jnp.sin(y) - c, lambda z, y, rho: z, 1.0, c).value
+    for solver in (nj.SemismoothNewton(), nj.FixedPointVI()):
+        c32 = c.astype(jnp.float32)
+        sol = solver.solve(lambda y: y + 0.5 * jnp.sin(y) - c32, lambda z, y, rho: z, 0.5, c32)
+        assert sol.value.dtype == jnp.float32
+        assert sol.result == nj.RESULTS.successful, solver
+        np.testing.assert_allclose(sol.value, exact, rtol=5e-5)  # 8 eps x the contraction
+
+
 _SMALL_SOLVE = jax.jit(lambda A, b: nj._linalg.solve(A, b))
 
 
@@ -364,3 +378,13 @@ def test_small_solve_flags_singular_systems_and_batches():
     xs, oks = jax.vmap(_SMALL_SOLVE)(As, bs)
     assert bool(jnp.all(oks))
     np.testing.assert_allclose(xs, np.linalg.solve(As, bs[..., None])[..., 0], rtol=1e-10)
+
+
+def test_singular_newton_system_falls_back_to_the_projection_step():
+    # G(y) = y^3 - 1 (identity projector, rho = 1) from y = 0, where the Newton matrix
+    # 3 y^2 is singular: the step falls back to d = -G(0) = 1, which lands on the root.
+    solver = nj.SemismoothNewton(rtol=1e-12, atol=1e-12)
+    sol = solver.solve(lambda y: y**3 - 1.0, lambda z, y, rho: z, 1.0, jnp.zeros(1))
+    assert sol.result == nj.RESULTS.successful
+    assert int(sol.iterations) == 1
+    assert float(sol.value[0]) == 1.0

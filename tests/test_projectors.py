@@ -751,6 +751,39 @@ def test_contact_impact_restitution(e):
     assert float(out[0]) == 0.001
 
 
+def test_switched_sees_a_component_landing_on_a_bound():
+    # The faces of a box are its bounds and its interior; a clip lands a component exactly
+    # on a bound (a diode's current turning off is 0.0): that is a change of face, and so
+    # are leaving a bound and moving between bounds. Staying on one is not.
+    box, orthant = nv.Box(-1.0, 1.0), nv.NonNegative()
+    cases = [
+        (orthant, [1.0], [0.0], True),
+        (orthant, [0.0], [0.5], True),
+        (orthant, [0.0], [0.0], False),
+        (orthant, [0.3], [0.5], False),
+        (box, [0.2], [1.0], True),
+        (box, [-1.0], [1.0], True),
+        (box, [1.0], [1.0], False),
+        (box, [0.2], [-0.5], False),
+    ]
+    for projector, before, after, switched in cases:
+        z = jnp.asarray(after)
+        ctx = context(z, y_prev=before, y_iter=after)
+        assert bool(projector.switched(ctx)) == switched, (projector, before, after)
+
+
+@pytest.mark.parametrize("e", [0.5, 1.0])
+def test_contact_restitution_acts_on_approach_only(e):
+    # A contact penetrated at the stage start but separating (u- = +1; active: its gap stays
+    # closed over the lookahead) whose candidate velocity points into the floor: Newton's
+    # law restores nothing of a separating velocity, so the velocity after is exactly 0
+    # (u+ >= -e u- would let the body move further in).
+    y_prev = jnp.array([-0.1, 1.0])
+    z = jnp.array([-0.1, -3.0])
+    out = _floor(e)(z, context(z, y_prev=y_prev, h=H))
+    assert float(out[1]) == 0.0
+
+
 _floor_fns = jacobian_fns(lambda z, y_prev: _floor(0.5)(z, context(z, y_prev=y_prev, h=H)), 0)
 
 

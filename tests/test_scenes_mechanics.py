@@ -442,3 +442,31 @@ def test_slider_outputs_inside_a_long_stick():
     sol = scene.solve(0.0, 5.9, x0, args, t_eval=jnp.asarray(ts))
     assert sol.result == nj.RESULTS.successful
     assert np.max(np.abs(np.asarray(sol.y_eval[:, :2]))) < 1e-12
+
+
+@pytest.mark.parametrize("e", [0.0, 1.0])
+def test_contact_impulses_follow_the_inverse_mass(e):
+    # Two bodies on a line, m1 = 3 moving at 1 into m2 = 1 at rest: Newton's law with the
+    # impulse map M^-1 W conserves momentum; plastic (e = 0) they move on together at
+    # m1 / (m1 + m2), elastic (e = 1) they exchange velocities as 1D elastic collisions do.
+    m1, m2 = 3.0, 1.0
+
+    def dynamics(t, x, a, m):
+        return jnp.stack([x[2], x[3], 0.0 * x[2], 0.0 * x[3]])
+
+    contact = nj.Contact(
+        lambda t, x, a: x[1:2] - x[0:1],
+        positions=[0, 1],
+        velocities=[2, 3],
+        restitution=e,
+        inverse_mass=jnp.diag(jnp.array([1 / m1, 1 / m2])),
+    )
+    scene = nj.Scene(dynamics, 4, (contact,))
+    sol = scene.solve(0.0, 2.0, jnp.array([0.0, 1.0, 1.0, 0.0]), {}, stepper=nj.Bathe())
+    v = np.asarray(sol.y_final[2:4])
+    if e == 0.0:
+        expected = [m1 / (m1 + m2)] * 2
+    else:
+        expected = [(m1 - m2) / (m1 + m2), 2 * m1 / (m1 + m2)]
+    np.testing.assert_allclose(v, expected, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(m1 * v[0] + m2 * v[1], m1, rtol=1e-12)

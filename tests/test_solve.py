@@ -351,3 +351,22 @@ def test_float32():
     assert sol.ys.dtype == jnp.float32
     assert sol.result == nj.RESULTS.successful
     np.testing.assert_allclose(sol.y_final, exact_oscillator(1.0), atol=1e-3)
+
+
+@pytest.mark.parametrize("h0", [0.1, 0.3, 1 / 7])
+def test_fixed_steps_land_on_t1_without_a_round_off_step(h0):
+    # Float accumulation of fixed steps leaves t a few ulps short of t1 (9 x 0.1 is
+    # 0.8999999999999999); the step that would leave such a remainder lands on t1 instead.
+    sol = nj.solve(
+        lambda t, y, args: jnp.ones_like(y),
+        0.0,
+        1.0,
+        jnp.zeros(1),
+        stepper=nj.BackwardEuler(),
+        controller=nj.ConstantStepSize(),
+        h0=h0,
+    )
+    n = int(np.ceil(1.0 / h0 - 1e-9))
+    assert int(sol.n_accepted) == n
+    assert float(sol.ts[n]) == 1.0
+    assert np.all(np.diff(np.asarray(sol.ts[: n + 1])) > 0.5 * min(h0, 1 - (n - 1) * h0))

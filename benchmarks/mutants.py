@@ -1,0 +1,1152 @@
+"""The curated mutants of `python -m benchmarks.mutation`: one-line edits of the numerics at
+lines whose comment or docstring says why the line is what it is.
+
+Each `Mutant` names its file, the exact original text (which must occur exactly once in it:
+the harness checks, and `tests/test_mutants.py` too), its replacement, the claim it tests,
+and the tests of its area to run (pytest node ids, narrow enough that one run takes seconds
+to a minute or two: `-x` stops a killed mutant at its first failure). `area` groups mutants
+for the baseline run of the unmutated copy.
+"""
+
+from typing import NamedTuple
+
+
+class Mutant(NamedTuple):
+    name: str
+    area: str
+    file: str
+    original: str
+    replacement: str
+    reason: str
+    tests: tuple[str, ...]
+
+
+P = "nivpjax/_projector/"
+N = "nivpjax/_nonlinear/"
+S = "nivpjax/_stepper/"
+C = "nivpjax/_controller/"
+TP = "tests/test_projectors.py::"
+TN = "tests/test_nonlinear.py::"
+TE = "tests/test_estimates.py::"
+TEV = "tests/test_event_prediction.py::"
+TS = "tests/test_sensitivities.py::"
+TC = "tests/test_compat.py::"
+
+MUTANTS = [
+    # ---------------------------------------------------------------- projectors and JVPs
+    Mutant(
+        "clip_jvp_boundary_strict",
+        "projectors",
+        P + "box.py",
+        "below = z < lower",
+        "below = z <= lower",
+        "clip's docstring: the boundary is in the set and gets the identity, not the bound's "
+        "derivative",
+        (TP + "test_clip_kinks_take_identity", TP + "test_clip_jacobian"),
+    ),
+    Mutant(
+        "clip_jvp_bounds_swapped",
+        "projectors",
+        P + "box.py",
+        "dout = jnp.where(below, dlower, jnp.where(above, dupper, dz))",
+        "dout = jnp.where(below, dupper, jnp.where(above, dlower, dz))",
+        "clip's docstring: d/dl = 1 below the box, d/du = 1 above it",
+        (TP + "test_clip_jacobian",),
+    ),
+    Mutant(
+        "nonnegative_switched_strict",
+        "projectors",
+        P + "box.py",
+        "return jnp.any((z0 <= 0) != (z1 <= 0))",
+        "return jnp.any((z0 < 0) != (z1 < 0))",
+        "NonNegative.switched's docstring: a component became zero or positive (a clip lands "
+        "exactly on 0)",
+        (
+            TP + "test_switched_sees_a_component_landing_on_a_bound",
+            "tests/test_scenes_switching.py::test_rectifier_conduction_intervals",
+            TS + "test_rectifier_derivative_after_a_step_over_the_turn_off",
+        ),
+    ),
+    Mutant(
+        "ball_jvp_boundary_strict",
+        "projectors",
+        P + "ball.py",
+        "    nrm = _safe_norm(w)\n    inside = (nrm <= r) & (r > 0)\n    nrm_safe",
+        "    nrm = _safe_norm(w)\n    inside = (nrm < r) & (r > 0)\n    nrm_safe",
+        "project_ball's docstring: identity on the closed ball, the boundary |w| = r included",
+        (TP + "test_ball_kinks", TP + "test_project_ball_jacobian"),
+    ),
+    Mutant(
+        "ball_jvp_no_tangential_projection",
+        "projectors",
+        P + "ball.py",
+        "(r / nrm_safe) * (dw - what * jnp.dot(what, dw))",
+        "(r / nrm_safe) * dw",
+        "project_ball's docstring: r/|w| (I - w^ w^T) dw outside the ball",
+        (TP + "test_project_ball_jacobian",),
+    ),
+    Mutant(
+        "ball_jvp_no_radius_term",
+        "projectors",
+        P + "ball.py",
+        " + what * dradius",
+        "",
+        "project_ball's docstring: + w^ dr outside (a state-dependent radius, mu N)",
+        (TP + "test_project_ball_jacobian", TP + "test_ball_state_dependent_jacobian"),
+    ),
+    Mutant(
+        "ball_jvp_zero_radius",
+        "projectors",
+        P + "ball.py",
+        "d_out = jnp.where(inside, dw, jnp.where(r > 0, d_out, jnp.zeros_like(dw)))",
+        "d_out = jnp.where(inside, dw, d_out)",
+        "project_ball's docstring: zero Jacobian when r <= 0 (the set is the point 0)",
+        (TP + "test_ball_kinks", TP + "test_project_ball_jacobian"),
+    ),
+    Mutant(
+        "soc_alpha_coefficient",
+        "projectors",
+        P + "soc.py",
+        "alpha = (s + mu * r) / (1.0 + mu**2)",
+        "alpha = (s + mu * r) / (1.0 + mu)",
+        "project_soc's docstring: alpha = (s + mu |w|) / (1 + mu^2) on the boundary ray",
+        (
+            TP + "test_output_in_set",
+            TP + "test_project_soc_jacobian",
+            TP + "test_variational_inequality",
+            TP + "test_soc_matches_reference",
+        ),
+    ),
+    Mutant(
+        "soc_polar_open",
+        "projectors",
+        P + "soc.py",
+        "polar = (mu * r <= -s) & ~inside",
+        "polar = (mu * r < -s) & ~inside",
+        "project_soc's docstring: zero Jacobian on the closed polar cone",
+        (TP + "test_soc_kinks",),
+    ),
+    Mutant(
+        "soc_inside_without_s_nonnegative",
+        "projectors",
+        P + "soc.py",
+        "inside = (r <= mu * s) & (s >= 0)",
+        "inside = r <= mu * s",
+        "project_soc's docstring: s >= 0 matters at mu = 0, where K_0 = {w = 0, s >= 0}",
+        (TP + "test_soc_non_expansive_at_zero_friction", TP + "test_output_in_set"),
+    ),
+    Mutant(
+        "coulomb_unscaled_clip",
+        "projectors",
+        P + "coulomb.py",
+        "return z - rho * clip(z / rho, -c, c)",
+        "return z - rho * clip(z, -c, c)",
+        "CoulombFriction's docstring: P(z) = z - rho clip(z / rho, -c, c) (Moreau)",
+        (TP + "test_coulomb_is_soft_thresholding",),
+    ),
+    Mutant(
+        "coulomb_isotropic_unscaled",
+        "projectors",
+        P + "coulomb.py",
+        "return z - rho * project_ball(z / rho, c)",
+        "return z - project_ball(z, c)",
+        "CoulombFriction's docstring: isotropic friction is the ball's Moreau decomposition "
+        "with the stage's rho",
+        (
+            "tests/test_friction_order.py::test_reactions_at_the_steps[tr]",
+            "tests/test_scenes_mechanics.py::test_block_on_plane",
+        ),
+    ),
+    Mutant(
+        "sign_tau_ignores_rho",
+        "projectors",
+        P + "sign.py",
+        "tau = jnp.broadcast_to(ctx.rho, z.shape)[w] if self.tau is None else self.tau",
+        "tau = 1.0 if self.tau is None else self.tau",
+        "SignResolvent's docstring: tau=None uses the stage's own scaling tau = rho_w",
+        (TP + "test_sign_resolvent_tau_default_uses_rho",),
+    ),
+    Mutant(
+        "lcp_jvp_degenerate_active",
+        "projectors",
+        P + "lcp.py",
+        "    S = p > 0\n    dp",
+        "    S = p >= 0\n    dp",
+        "lcp_solve's docstring: a degenerate contact (p = 0, Dp + q = 0) is inactive in the JVP",
+        (TP + "test_lcp_degenerate_index_is_inactive", TP + "test_lcp_jacobian"),
+    ),
+    Mutant(
+        "lcp_single_contact_unscaled",
+        "projectors",
+        P + "lcp.py",
+        "p0 = jnp.maximum(0.0, -q / jnp.where(diag > 0, diag, 1.0))",
+        "p0 = jnp.maximum(0.0, -q)",
+        "lcp_solve: one contact, p = max(0, -q/D) is the exact solution",
+        (TP + "test_lcp_complementarity", TP + "test_contact_coupled_impulse_map"),
+    ),
+    Mutant(
+        "lcp_active_set_strict_sign",
+        "projectors",
+        P + "lcp.py",
+        "S = p - (D @ p + q) > 0",
+        "S = p + (D @ p + q) > 0",
+        "lcp_solve's docstring: the active set of semismooth Newton on min(p, Dp + q) = 0",
+        (TP + "test_lcp_complementarity",),
+    ),
+    Mutant(
+        "contact_restitution_on_separation",
+        "projectors",
+        P + "contact.py",
+        "q = jnp.where(active, Wt @ z + e * jnp.minimum(u_minus, 0.0), 0.0)",
+        "q = jnp.where(active, Wt @ z + e * u_minus, 0.0)",
+        "the comment: restitution acts on approach velocities only (a separating contact "
+        "gets u+ >= 0)",
+        (
+            TP + "test_contact_restitution_acts_on_approach_only",
+            TP + "test_contact_coupled_impulse_map",
+            TP + "test_contact_impact_restitution",
+            TP + "test_contact_matches_reference",
+        ),
+    ),
+    Mutant(
+        "contact_violation_without_late_velocity",
+        "events",
+        P + "contact.py",
+        "return jnp.max(jnp.maximum(depth, velocity), initial=0.0)",
+        "return jnp.max(depth, initial=0.0)",
+        "UnilateralContact.violation: a late impact's velocity error (1 + e)|a| dt counts "
+        "(measured: a Zeno ball's steps ten times its flights)",
+        (
+            TEV + "test_zeno_ball_impacts_at_step_boundaries",
+            TEV + "test_micro_bounces_do_not_fall_through_the_floor",
+        ),
+    ),
+    Mutant(
+        "contact_no_lift_off_prediction",
+        "events",
+        P + "contact.py",
+        "lift_off = jnp.min(lift, initial=jnp.inf)",
+        "lift_off = jnp.inf",
+        "UnilateralContact.next_event: a resting contact predicts its lift-off (measured: "
+        "dv(T)/dg off by 2.2e-3 on a plastic contact)",
+        (TS + "test_plastic_contact_closing_and_opening",),
+    ),
+    Mutant(
+        "contact_landed_margin",
+        "events",
+        P + "contact.py",
+        "_LANDED = 1e-2",
+        "_LANDED = 0.0",
+        "the comment: a step that ended within 1% of its size before a contact closes has "
+        "landed on it (else a cascade of 5 to 20 rejections)",
+        (
+            TEV + "test_zeno_ball_impacts_at_step_boundaries",
+            TEV + "test_a_step_short_of_a_contact_lands_on_it",
+        ),
+    ),
+    Mutant(
+        "contact_event_time_gradient_dropped",
+        "events",
+        P + "contact.py",
+        "tau = jnp.where(closed & impact, tau - jax.lax.stop_gradient(tau), tau)",
+        "tau = jnp.where(closed & impact, jax.lax.stop_gradient(tau - tau), tau)",
+        "event_time's comment: a gap closed to round-off keeps tau's derivative (how the "
+        "landing moves with the data)",
+        (
+            "tests/test_event_gradients.py::test_gradient_through_an_impact_matches_closed_form",
+            TS + "test_plastic_contact_closing_and_opening",
+        ),
+    ),
+    # ------------------------------------------------------------ event prediction kernels
+    Mutant(
+        "first_root_discriminant",
+        "events",
+        P + "predict.py",
+        "disc = ds**2 - 2 * dds * s",
+        "disc = ds**2 - 4 * dds * s",
+        "first_root's docstring: roots of s + s' tau + s'' tau^2 / 2 (not the textbook b^2 - 4ac)",
+        (TEV + "test_zeno_ball_impacts_at_step_boundaries",),
+    ),
+    Mutant(
+        "secant_crossing_half",
+        "events",
+        P + "predict.py",
+        "tau = h * s0 / jnp.where(approaching, -ds, 1.0)",
+        "tau = 0.5 * h * s0 / jnp.where(approaching, -ds, 1.0)",
+        "secant_crossing's docstring: the zero of the secant through the two end values",
+        (
+            TEV + "test_secant_crossing_is_the_zero_of_the_secant",
+            TEV + "test_relay_sliding_entry_is_predicted_from_the_rates",
+        ),
+    ),
+    Mutant(
+        "hermite_excursion_c2",
+        "events",
+        P + "predict.py",
+        "c2 = -3 * s0 - 2 * m0 + 3 * s1 - m1",
+        "c2 = -3 * s0 - m0 + 3 * s1 - m1",
+        "hermite_excursion's docstring: the cubic Hermite interpolant of the end values and rates",
+        (TEV + "test_hermite_excursion_measures_a_crossing_and_back",),
+    ),
+    # ------------------------------------------------------------------ nonlinear solvers
+    Mutant(
+        "ssn_no_watchdog",
+        "nonlinear",
+        N + "semismooth_newton.py",
+        "full_steps: int = eqx.field(static=True, default=3)",
+        "full_steps: int = eqx.field(static=True, default=0)",
+        "SemismoothNewton's docstring: a monotone line search stalls on stiffly coupled "
+        "switching systems (the watchdog's full steps)",
+        (
+            TN + "test_newton_line_search_after_the_watchdog",
+            TN + "test_relay_step",
+            "tests/test_filippov.py::test_invariant_or_failure_code[bathe-newton]",
+            "tests/test_filippov.py::test_invariant_or_failure_code[tr-newton]",
+        ),
+    ),
+    Mutant(
+        "ssn_fallback_sign",
+        "nonlinear",
+        N + "semismooth_newton.py",
+        "d = jnp.where(ok, d, -g)",
+        "d = jnp.where(ok, d, g)",
+        "SemismoothNewton's docstring: a singular Newton system falls back to d = -G(y)",
+        (
+            TN + "test_singular_newton_system_falls_back_to_the_projection_step",
+            TN + "test_relay_step",
+            TN + "test_contact_step_resting",
+            TN + "test_soc_step_sticking",
+            "tests/test_hard_cases.py::test_random_vi[newton]",
+        ),
+    ),
+    Mutant(
+        "ssn_armijo_loosened",
+        "nonlinear",
+        N + "semismooth_newton.py",
+        "(1 - 2 * self.sigma * alpha) * m0",
+        "(1 + 2 * self.sigma * alpha) * m0",
+        "Armijo's sufficient decrease after the watchdog (issue 29's survivor)",
+        (TN + "test_newton_line_search_after_the_watchdog",),
+    ),
+    Mutant(
+        "ssn_stops_at_initial_guess",
+        "nonlinear",
+        N + "semismooth_newton.py",
+        "& ((k == 0) | (scaled_error(g, y, rtol, atol) > 1))",
+        "& (scaled_error(g, y, rtol, atol) > 1)",
+        "the comment: stopping at the initial guess freezes the state on tiny steps "
+        "(issue 29's survivor)",
+        (TN + "test_tiny_steps_do_not_freeze_the_state",),
+    ),
+    Mutant(
+        "ssn_backtrack_grows",
+        "nonlinear",
+        N + "semismooth_newton.py",
+        "beta: float = 0.5",
+        "beta: float = 1.0",
+        "SemismoothNewton: beta is the backtracking factor (a factor 1 never backtracks)",
+        (TN + "test_newton_line_search_after_the_watchdog",),
+    ),
+    Mutant(
+        "vi_stops_at_initial_guess",
+        "nonlinear",
+        N + "fixed_point.py",
+        "done = finite & (k > 0) & (scaled_error(natural, y, rtol, atol) <= 1)",
+        "done = finite & (scaled_error(natural, y, rtol, atol) <= 1)",
+        "the comment: never stop at the initial guess (see SemismoothNewton): move at least once"
+        "; NEAR-EQUIVALENT: a done first iterate still returns the projection step whenever "
+        "it contracts",
+        (
+            TN + "test_tiny_steps_do_not_freeze_the_state",
+            TN + "test_relay_step",
+            TN + "test_contact_step_resting",
+        ),
+    ),
+    Mutant(
+        "vi_no_final_projection_step",
+        "nonlinear",
+        N + "fixed_point.py",
+        "y_new = jnp.where(done, jnp.where(plain & (alpha >= 1.0), y_bar, y), moved)",
+        "y_new = jnp.where(done, y, moved)",
+        "the comment: end with the projection step, which solves explicit rows exactly "
+        "(else 1e-10 of position per step: micro-bounces of a ball at rest)",
+        (
+            TN + "test_contact_step_resting",
+            TN + "test_relay_step",
+            "tests/test_hard_cases.py::test_ball_resting_contact_carries_weight[bathe-vi]",
+        ),
+    ),
+    Mutant(
+        "vi_extragradient_unguarded",
+        "nonlinear",
+        N + "fixed_point.py",
+        "extra = ~plain & finite & (L <= self.nu)",
+        "extra = ~plain & finite",
+        "FixedPointVI's docstring: the extragradient step only if L <= nu, else reject and shrink",
+        (
+            TN + "test_relay_step",
+            TN + "test_soc_step_sliding",
+            "tests/test_hard_cases.py::test_random_vi[vi]",
+        ),
+    ),
+    Mutant(
+        "vi_kappa_expanding",
+        "nonlinear",
+        N + "fixed_point.py",
+        "kappa: float = 0.7",
+        "kappa: float = 1.5",
+        "FixedPointVI's docstring: a projection step only when it contracts (plain "
+        "projection cycles on saddle stages)",
+        (
+            TN + "test_relay_step",
+            TN + "test_soc_step_sliding",
+            TN + "test_soc_step_sticking",
+            "tests/test_hard_cases.py::test_random_vi[vi]",
+        ),
+    ),
+    Mutant(
+        "vi_step_never_grows",
+        "nonlinear",
+        N + "fixed_point.py",
+        "accept, jnp.where(L < 0.5 * self.nu, grown, alpha), alpha * shrink",
+        "accept, alpha, alpha * shrink",
+        "FixedPointVI's docstring: alpha grows after an accepted move with L < nu/2",
+        (
+            TN + "test_relay_step",
+            TN + "test_contact_step_resting",
+            TN + "test_soc_step_sliding",
+            TN + "test_vi_reports_failure_with_small_budget",
+        ),
+    ),
+    Mutant(
+        "solve_returns_raw_iterate",
+        "nonlinear",
+        N + "base.py",
+        "value = jnp.where(lax.stop_gradient((p != z) | outside), p, y)",
+        "value = y",
+        "NonlinearSolution.value: constrained components lie exactly in their sets, "
+        "converged or not (issue 29's survivor)",
+        (TN + "test_returned_multipliers_lie_exactly_in_their_sets",),
+    ),
+    Mutant(
+        "solve_projects_free_components",
+        "nonlinear",
+        N + "base.py",
+        "value = jnp.where(lax.stop_gradient((p != z) | outside), p, y)",
+        "value = p",
+        "the comment: free components keep the iterate, which satisfies its own equations "
+        "more exactly",
+        (
+            TN + "test_tiny_steps_do_not_freeze_the_state",
+            TN + "test_relay_step",
+            TN + "test_newton_superlinear",
+            "tests/test_solve.py::test_order_of_convergence",
+        ),
+    ),
+    Mutant(
+        "float32_tolerances_unclamped",
+        "nonlinear",
+        N + "base.py",
+        "return max(float(rtol), 8 * eps), max(float(atol), 8 * eps)",
+        "return float(rtol), float(atol)",
+        "effective_tolerances: a float32 solve asked for 1e-12 would otherwise never converge",
+        (
+            TN + "test_float32_tolerances_are_clamped_to_its_resolution",
+            TN + "test_float32_relay",
+            "tests/test_solve.py::test_float32",
+        ),
+    ),
+    # ---------------------------------------------------------- implicit-function gradients
+    Mutant(
+        "tangent_solve_sign",
+        "gradients",
+        N + "base.py",
+        "x, _ = dense_solve(J, b)\n    return x",
+        "x, _ = dense_solve(J, -b)\n    return x",
+        "_tangent_solve solves g(x) = b: the implicit function theorem's linear system",
+        (TN + "test_gradient_soc_sliding_matches_fd",),
+    ),
+    Mutant(
+        "tangent_residual_dropped",
+        "gradients",
+        N + "base.py",
+        "z = y - rho * (residual(y) + tangent_only(lambda v: residual_t(v) - residual(v), y))",
+        "z = y - rho * residual(y)",
+        "NonlinearSolver.solve's docstring: the projected components carry the tangent "
+        "residual's element of the generalised Jacobian",
+        (
+            TS + "test_relay_crossing_carries_the_saltation_term",
+            TS + "test_slider_reversals_converge_to_exact_derivative",
+            TS + "test_rectifier_converges_to_exact_derivative",
+        ),
+    ),
+    Mutant(
+        "tangent_solve_jacobian_at_b",
+        "gradients",
+        N + "base.py",
+        "J = jax.jacfwd(g)(jnp.zeros_like(b))",
+        "J = jax.jacfwd(g)(b)",
+        "_tangent_solve's comment: the Jacobian is taken at zero so that nothing but the solve "
+        "touches b (reverse mode transposes it in b); SURVIVED the reverse-mode gradient tests: "
+        "g is linear, so its Jacobian at b equals that at 0 and JAX transposes it anyway (the "
+        "comment's reason is not reproduced; equivalent here)",
+        (TN + "test_gradient_relay_sliding", TN + "test_gradient_soc_sliding_matches_fd"),
+    ),
+    Mutant(
+        "relay_without_saltation",
+        "gradients",
+        "nivpjax/_scene/switching.py",
+        "EventLocated(box, OnScene(self.switch, n_states), saltation=True)",
+        "EventLocated(box, OnScene(self.switch, n_states), saltation=False)",
+        "Relay: the multipliers jump across the surface, whose crossing's saltation term "
+        "the derivatives need",
+        (
+            TS + "test_relay_crossing_carries_the_saltation_term",
+            TS + "test_relay_entering_and_leaving_sliding",
+        ),
+    ),
+    # ------------------------------------------------------------- steppers and estimates
+    Mutant(
+        "theta_leading_term_sign",
+        "steppers",
+        S + "one_leg.py",
+        "e = (theta - 0.5) * h * (f1 - f0)",
+        "e = (0.5 - theta) * h * (f1 - f0)",
+        "theta_error's docstring: e is the computed minus the exact state, (theta - 1/2) h^2 y''",
+        (TE + "test_estimate_tracks_local_error",),
+    ),
+    Mutant(
+        "tr_estimate_constant",
+        "steppers",
+        S + "one_leg.py",
+        "e = e + h**2 / 12 * (df1 - df0)",
+        "e = e + h**2 / 6 * (df1 - df0)",
+        "theta_error's docstring: the trapezoidal rule's + h^3/12 y'''",
+        (TE + "test_estimate_tracks_local_error",),
+    ),
+    Mutant(
+        "theta_defect_dropped",
+        "steppers",
+        S + "one_leg.py",
+        "    e = e + (1 - theta) * h * defect\n",
+        "",
+        "theta_error's docstring: a scheme averaging the end rates errs by (1 - theta) h |D| "
+        "at a jump of the rate",
+        (
+            TE + "test_estimate_sees_an_equation_row",
+            "tests/test_filippov.py::test_invariant_or_failure_code[tr-newton]",
+            "tests/test_filippov.py::test_invariant_or_failure_code[theta0.7-newton]",
+            "tests/test_hard_cases.py::test_sliding_mode_control_without_chattering[tr]",
+        ),
+    ),
+    Mutant(
+        "theta_secant_across_switch",
+        "steppers",
+        S + "one_leg.py",
+        "secant = jnp.where(switched, 0.0, (y1 - y0) / h_safe)",
+        "secant = (y1 - y0) / h_safe",
+        "state_rate's docstring: a jump of the multipliers is not smooth flow; the secant "
+        "would explain it away (issue 29's survivor)",
+        (
+            TE + "test_estimate_tracks_local_error",
+            TE + "test_estimate_sees_an_equation_row",
+            "tests/test_filippov.py::test_invariant_or_failure_code[tr-newton]",
+            "tests/test_filippov.py::test_invariant_or_failure_code[theta0.7-newton]",
+            "tests/test_filippov_trust.py::test_forced_relay_leaves_sliding[tr-box-1.3-2.0]",
+            "tests/test_filippov_trust.py::test_forced_relay_leaves_sliding[tr-sign-1.3-2.0]",
+        ),
+    ),
+    Mutant(
+        "theta_multiplier_rate_zero",
+        "steppers",
+        S + "one_leg.py",
+        "rate = jnp.where(model.algebraic, secant, model.to_state(F))",
+        "rate = jnp.where(model.algebraic, 0.0, model.to_state(F))",
+        "state_rate's docstring: multipliers get their secant rate, so a multiplier sliding "
+        "along an equivalent control is seen as moving",
+        (
+            TE + "test_estimate_tracks_local_error",
+            "tests/test_filippov_trust.py::test_forced_relay_leaves_sliding[tr-box-1.3-2.0]",
+            "tests/test_hard_cases.py::test_sliding_mode_control_without_chattering[tr]",
+        ),
+    ),
+    Mutant(
+        "switch_kink_from_start",
+        "steppers",
+        S + "one_leg.py",
+        "return jnp.where(switched, (1 - theta) * (h - tau) * (f0 - f1), 0.0)",
+        "return jnp.where(switched, (1 - theta) * tau * (f0 - f1), 0.0)",
+        "switch_kink_error: the scheme errs over the part of the step after the switch "
+        "(measured: a block sliding to rest 1.8e-2 off with TR)",
+        (
+            "tests/test_scenes_mechanics.py::"
+            "test_block_comes_to_rest_at_the_tolerance_with_the_trapezoidal_rule",
+        ),
+    ),
+    Mutant(
+        "event_in_step_strict",
+        "steppers",
+        S + "one_leg.py",
+        "jnp.where(tau <= h * (1 + jnp.sqrt(jnp.finfo(y1.dtype).eps)), jnp.minimum(tau, h), 0.0)",
+        "jnp.where(tau <= h, tau, 0.0)",
+        "event_in_step's comment: a landing step's tau is one ulp above h (measured: sliding "
+        "time off by 8e-4 at rtol 1e-5, successful)",
+        (
+            "tests/test_scenes_switching.py::test_relay_reaching_time",
+            "tests/test_scenes_switching.py::test_relay_filippov_sliding",
+            "tests/test_filippov_trust.py::test_forced_relay_leaves_sliding[be-box-1.3-2.0]",
+            "tests/test_filippov_trust.py::test_forced_relay_leaves_sliding[tr-box-1.3-2.0]",
+        ),
+    ),
+    Mutant(
+        "be_late_switch_dropped",
+        "steppers",
+        S + "one_leg.py",
+        "return f0_end, tau * (f0 - f0_end)",
+        "return f0_end, 0.0 * tau * (f0 - f0_end)",
+        "late_switch_error's docstring: rejects a step that crosses a switching surface or "
+        "lands on it too early",
+        (
+            "tests/test_scenes_switching.py::test_relay_reaching_time",
+            "tests/test_filippov.py::test_invariant_or_failure_code[be-newton]",
+            "tests/test_filippov.py::test_invariant_or_failure_code[be-vi]",
+        ),
+    ),
+    Mutant(
+        "be_start_rate_end_only",
+        "steppers",
+        S + "one_leg.py",
+        "base = jnp.where(jnp.abs(d_start) < jnp.abs(d_end), d_start, d_end)",
+        "base = d_end",
+        "the comment: f0_end is off by O(h) after a landing step's averaged multiplier; the "
+        "smaller difference is the right-limit one",
+        (
+            TE + "test_estimate_tracks_local_error",
+            TE + "test_estimate_sees_an_equation_row",
+            "tests/test_filippov.py::test_invariant_or_failure_code[be-newton]",
+            "tests/test_filippov.py::test_invariant_or_failure_code[be-vi]",
+        ),
+    ),
+    Mutant(
+        "be_equation_rows_take_end",
+        "steppers",
+        S + "one_leg.py",
+        "f0_end = model.f(t0, jnp.where(model.selection_rows, y1, y0), args)",
+        "f0_end = model.f(t0, jnp.where(model.algebraic, y1, y0), args)",
+        "backward_euler_error's docstring: equation rows keep their start values (taking the "
+        "end's: an estimate 1000x too small on a diode)",
+        (TE + "test_estimate_sees_an_equation_row",),
+    ),
+    Mutant(
+        "be_estimate_constant",
+        "steppers",
+        S + "one_leg.py",
+        "return 0.5 * h * (f1 - f0)\n",
+        "return 0.25 * h * (f1 - f0)\n",
+        "BackwardEuler's docstring: the embedded estimate h/2 (f1 - f0)",
+        (TE + "test_estimate_tracks_local_error",),
+    ),
+    Mutant(
+        "friction_weighed_reaction_dropped",
+        "steppers",
+        S + "one_leg.py",
+        "F = jnp.where(model.weighed, f + r, f)",
+        "F = f",
+        "_effective: on weighed rows F = f + r, the law's reaction at each end (slip weakening)",
+        (
+            "tests/test_friction_order.py::test_adaptive_as_accurate_as_the_smooth_field[weakening-tr]",
+            "tests/test_friction_order.py::test_adaptive_as_accurate_as_the_smooth_field[disk-tr]",
+        ),
+    ),
+    Mutant(
+        "friction_reaction_derivative_dropped",
+        "steppers",
+        S + "one_leg.py",
+        "return F, rate, flow_derivative(model, t, y, rate, args) + along(rate)",
+        "return F, rate, flow_derivative(model, t, y, rate, args)",
+        "_effective's comment: F_dot includes the reaction's derivative along the flow (TR's "
+        "estimate was blind to it: 2.2x the smooth field's error)",
+        (
+            "tests/test_friction_order.py::test_adaptive_as_accurate_as_the_smooth_field[weakening-tr]",
+            "tests/test_friction_order.py::test_adaptive_as_accurate_as_the_smooth_field[disk-tr]",
+        ),
+    ),
+    Mutant(
+        "bathe_error_constant",
+        "steppers",
+        S + "bathe.py",
+        "return (3 * gamma**2 - 4 * gamma + 2) / (6 * (2 - gamma))",
+        "return (3 * gamma**2 - 4 * gamma + 2) / (3 * (2 - gamma))",
+        "error_constant's docstring: K = 1/12 at gamma = 1/2",
+        (TE + "test_estimate_tracks_local_error",),
+    ),
+    Mutant(
+        "bathe_error_sign",
+        "steppers",
+        S + "bathe.py",
+        "F0 / g - Fg / (g * (1 - g)) + F1 / (1 - g)",
+        "F0 / g - Fg / (g * (1 - g)) - F1 / (1 - g)",
+        "bathe_error's docstring: the second divided difference on the three nodes",
+        (TE + "test_estimate_tracks_local_error",),
+    ),
+    Mutant(
+        "bathe_reaction_constant",
+        "steppers",
+        S + "bathe.py",
+        "r0 = (2 * r_a - g * r_b) / (2 - g)",
+        "r0 = r_a",
+        "the comment: reactions linear in time matching the stage averages (a body stuck "
+        "under a slowly varying load has exactly zero estimate)",
+        (
+            "tests/test_hard_cases.py::test_stick_slip_under_slowly_growing_load[bathe]",
+            "tests/test_friction_order.py::test_second_order_at_fixed_steps[disk-bathe]",
+            "tests/test_hard_cases.py::test_ball_resting_contact_carries_weight[bathe]",
+        ),
+    ),
+    Mutant(
+        "bathe_split_without_first_stage",
+        "steppers",
+        S + "bathe.py",
+        " + 0.5 * g * h * (f_mid - f0)",
+        "",
+        "Bathe's docstring: after a restart the estimate charges the rate jump inside the "
+        "first stage, gamma h / 2 (f_mid - f0)",
+        (
+            "tests/test_scenes_switching.py::test_relay_reaching_time",
+            "tests/test_filippov.py::test_invariant_or_failure_code[bathe-newton]",
+            "tests/test_filippov.py::test_invariant_or_failure_code[bathe-vi]",
+            "tests/test_scenes_mechanics.py::test_slider_stick_slip",
+        ),
+    ),
+    Mutant(
+        "bathe_no_restart_on_switch",
+        "steppers",
+        S + "bathe.py",
+        "restart = impulsive | switched",
+        "restart = impulsive",
+        "Bathe's docstring: after a change of face the backward difference would "
+        "extrapolate across the jump of the rate: restart",
+        (
+            "tests/test_filippov.py::test_invariant_or_failure_code[bathe-newton]",
+            "tests/test_filippov.py::test_invariant_or_failure_code[bathe-vi]",
+            "tests/test_scenes_switching.py::test_relay_filippov_sliding",
+            "tests/test_scenes_mechanics.py::test_slider_stick_slip",
+        ),
+    ),
+    Mutant(
+        "bathe_late_impact_uncharged",
+        "steppers",
+        S + "bathe.py",
+        "e = jnp.where(late_impact, e + late, e)",
+        "e = jnp.where(late_impact, e, e)",
+        "the comment: an impact inside the step charges its timing and the stage's holding",
+        (TEV + "test_impact_inside_a_step_charges_timing_and_holding",),
+    ),
+    Mutant(
+        "betr_late_switch_dropped",
+        "steppers",
+        S + "embedded_betr.py",
+        "error = jnp.where(jnp.abs(late) > jnp.abs(error), late, error)",
+        "error = jnp.where(jnp.abs(late) > jnp.abs(error), error, error)",
+        "the comment: a transient landing has TR - BE ~ 0 (measured: a Filippov spiral's "
+        "invariant off by 1.3e-2 at rtol 1e-3)",
+        (
+            "tests/test_filippov.py::test_invariant_or_failure_code[betr-newton]",
+            "tests/test_filippov.py::test_invariant_or_failure_code[betr-vi]",
+            "tests/test_filippov_trust.py::test_spiral_through_zeno_point[betr-10.0-0.1]",
+            "tests/test_filippov_trust.py::test_spiral_through_zeno_point[betr-300.0-0.02]",
+        ),
+    ),
+    Mutant(
+        "richardson_denominator",
+        "steppers",
+        S + "richardson.py",
+        "y_error = (half2.y1 - full.y1) / (2.0**p - 1.0)",
+        "y_error = (half2.y1 - full.y1) / 2.0**p",
+        "Richardson's docstring: the error of the two half steps is (y_h/2,h/2 - y_h)/(2^p - 1)",
+        (
+            TE + "test_richardson_estimate_tracks_local_error",
+            "tests/test_solve.py::test_adaptive_meets_tolerance",
+            TE + "test_estimate_tracks_local_error",
+        ),
+    ),
+    Mutant(
+        "multiplier_rho_not_scaled_by_h",
+        "steppers",
+        "nivpjax/_model.py",
+        "alg_rho = self.tau / h_eff",
+        "alg_rho = self.tau",
+        "AbstractEffect's docstring: multipliers entering the state with weight h are scaled "
+        "rho = tau / h"
+        "; NEAR-EQUIVALENT: the stage's fixed point does not depend on rho; iteration counts do",
+        (TN + "test_relay_step", "tests/test_scenes_switching.py::test_relay_filippov_sliding"),
+    ),
+    # --------------------------------------------------------------------- controllers
+    Mutant(
+        "pid_beta2_without_2d",
+        "controllers",
+        C + "pid.py",
+        "beta2 = -(self.pcoeff + 2 * self.dcoeff) / k",
+        "beta2 = -(self.pcoeff + self.dcoeff) / k",
+        "PIDController's docstring: beta2 = -(p + 2d) (issue 29's survivor)",
+        ("tests/test_controller_policy.py",),
+    ),
+    Mutant(
+        "pid_grows_after_rejection",
+        "controllers",
+        C + "pid.py",
+        "factor = jnp.where(accept & ~rejected_before, factor, jnp.minimum(factor, 1.0))",
+        "factor = jnp.where(accept, factor, jnp.minimum(factor, 1.0))",
+        "the comment: no growth on the step right after a rejection (Hairer & Wanner)",
+        ("tests/test_controller_policy.py",),
+    ),
+    Mutant(
+        "pid_ignores_violation",
+        "controllers",
+        C + "pid.py",
+        "err = jnp.maximum(err, info.violation / scale)",
+        "err = err + 0 * info.violation",
+        "the comment: a constraint crossed inside the step counts as error",
+        (
+            TEV + "test_micro_bounces_do_not_fall_through_the_floor",
+            "tests/test_scenes_mechanics.py::test_ball_impacts_and_apex_ratio",
+        ),
+    ),
+    Mutant(
+        "pid_failed_solve_not_shrunk",
+        "controllers",
+        C + "pid.py",
+        "factor = jnp.where(ok, factor, self.nonlinear_factor)",
+        "factor = jnp.where(ok, factor, 1.0)",
+        "AbstractController's docstring: failed nonlinear solves are rejected and shrunk",
+        (
+            "tests/test_controller_policy.py::test_pid_error_order_overrides_the_steppers",
+            "tests/test_controller_policy.py",
+            "tests/test_solve.py::test_h_min_reported",
+        ),
+    ),
+    Mutant(
+        "pid_error_order_override_ignored",
+        "controllers",
+        C + "pid.py",
+        "k = info.error_order if self.error_order is None else self.error_order",
+        "k = info.error_order",
+        "PIDController: error_order overrides the stepper's (the drop-in's method_order)",
+        (
+            "tests/test_controller_policy.py::test_pid_error_order_overrides_the_steppers",
+            TC + "test_defaults_are_the_reference_ones",
+            "tests/test_controller_policy.py",
+        ),
+    ),
+    Mutant(
+        "pid_initial_step_guess",
+        "controllers",
+        C + "pid.py",
+        "h = jnp.minimum(h, 0.1 * jnp.abs(t1 - t0))",
+        "h = jnp.minimum(h, jnp.abs(t1 - t0))",
+        "Hairer-Wanner's first guess, capped at a tenth of the interval",
+        ("tests/test_controller_policy.py", "tests/test_solve.py::test_attempt_log"),
+    ),
+    Mutant(
+        "norm_counts_masked_rows",
+        "controllers",
+        "nivpjax/_norms.py",
+        "count = jnp.maximum(jnp.sum(mask), 1)",
+        "count = mask.size",
+        "scaled_rms_norm's docstring: the RMS over the unmasked components",
+        (
+            "tests/test_controller_policy.py::test_masked_error_norm_is_the_rms_over_the_unmasked_rows",
+            "tests/test_controller_policy.py",
+            "tests/test_solve.py::test_dae_mass_matrix",
+            TE + "test_estimate_sees_an_equation_row",
+        ),
+    ),
+    Mutant(
+        "events_land_after_acceptance_from_t0",
+        "events",
+        C + "events.py",
+        "to_event = info.next_event - jnp.where(accept, info.h, 0.0)",
+        "to_event = info.next_event",
+        "land_before_event's docstring: after an acceptance the next step starts at t0 + h",
+        (
+            TEV + "test_zeno_ball_impacts_at_step_boundaries",
+            TEV + "test_relay_sliding_entry_is_predicted_from_the_rates",
+        ),
+    ),
+    Mutant(
+        "events_retry_crossed_late",
+        "events",
+        C + "events.py",
+        "crossed = ~accept & ok & (info.next_event < info.h * (1 - EVENT_SKIP))",
+        "crossed = ~accept & ok & (info.next_event < info.h)",
+        "the comment: an attempt that crossed the event in its last EVENT_SKIP is left to the "
+        "error-controlled factor (measured: 7936 rejections of one step, VI sliding landing)",
+        (
+            "tests/test_filippov.py::test_invariant_or_failure_code[bathe-vi]",
+            "tests/test_filippov.py::test_invariant_or_failure_code[be-vi]",
+            "tests/test_scenes_switching.py::test_super_twisting_finite_time_sliding",
+        ),
+    ),
+    Mutant(
+        "held_degeneracy_rule_off",
+        "events",
+        "nivpjax/_held.py",
+        "DETERMINED = 1e-3",
+        "DETERMINED = 0.0",
+        "the comment: a held row takes part only where G depends on the multipliers "
+        "(measured: super-twisting ran into max_steps without)",
+        ("tests/test_filippov_trust.py::test_second_order_sliding_is_not_checked_as_first_order",),
+    ),
+    Mutant(
+        "held_start_skipped",
+        "events",
+        "nivpjax/_held.py",
+        "return jax.lax.cond(jnp.any(held), start, lambda y0: y0, y0)",
+        "return y0",
+        "held_start's docstring: a held phase starts from its equivalent control (measured: "
+        "max_steps exhausted on a forced relay at rtol 1e-5 with the trapezoidal rule)",
+        (
+            "tests/test_filippov_trust.py::test_forced_relay_leaves_sliding[tr-box-1.3-2.0]",
+            "tests/test_filippov_trust.py::test_forced_relay_leaves_sliding[tr-sign-1.3-2.0]",
+        ),
+    ),
+    Mutant(
+        "held_one_sample",
+        "events",
+        "nivpjax/_held.py",
+        "SAMPLES = 8",
+        "SAMPLES = 1",
+        "the comment: an excursion of the equivalent control must span more than "
+        "1/(SAMPLES + 1) of a held step to be seen",
+        (
+            "tests/test_filippov_trust.py::test_forced_relay_leaves_sliding[be-box-2.5-3.0]",
+            "tests/test_filippov_trust.py::test_forced_relay_leaves_sliding[bathe-box-2.5-3.0]",
+            "tests/test_filippov_trust.py::test_forced_relay_leaves_sliding[tr-box-2.5-3.0]",
+        ),
+    ),
+    Mutant(
+        "loop_last_step_leaves_remainder",
+        "controllers",
+        "nivpjax/_loop.py",
+        "last = s.h >= remaining - h_min",
+        "last = s.h >= remaining",
+        "the comment: land on t1 rather than leave a remainder below h_min (a step of a few "
+        "ulps after fixed steps)",
+        (
+            "tests/test_solve.py::test_fixed_steps_land_on_t1_without_a_round_off_step",
+            "tests/test_solve.py::test_order_of_convergence",
+            "tests/test_solve.py::test_t_eval_and_buffers",
+            "tests/test_solve.py::test_attempt_log",
+        ),
+    ),
+    Mutant(
+        "interpolation_projected_rows_hermite",
+        "controllers",
+        "nivpjax/_loop.py",
+        "y = jnp.where(model.algebraic | projected, linear, hermite)",
+        "y = jnp.where(model.algebraic, linear, hermite)",
+        "the comment: rows a projector moves are interpolated linearly (a stuck slider's "
+        "velocity would bulge by k V h^2/8)",
+        ("tests/test_scenes_mechanics.py::test_slider_outputs_inside_a_long_stick",),
+    ),
+    Mutant(
+        "interpolation_without_saltation_shift",
+        "gradients",
+        "nivpjax/_loop.py",
+        "    y0 = y0 + model.switch_jump(t0, y0, t1, y1, args)\n",
+        "",
+        "evaluate's docstring: a step across a switch interpolates from its start moved by "
+        "the saltation term (else pre- and post-switch sensitivities blend)",
+        (
+            TS + "test_relay_crossing_carries_the_saltation_term",
+            TS + "test_relay_entering_and_leaving_sliding",
+            "tests/test_adjoint.py",
+        ),
+    ),
+    # ---------------------------------------------------------------------- scene effects
+    Mutant(
+        "saturation_surface_lower_twice",
+        "scenes",
+        "nivpjax/_scene/switching.py",
+        "return jnp.concatenate([u - self.lower, u - self.upper])",
+        "return jnp.concatenate([u - self.lower, u - self.lower])",
+        "Saturation: its events are u crossing either bound",
+        ("tests/test_scenes_switching.py::test_chua_kinks",),
+    ),
+    Mutant(
+        "saturation_constraint_sign",
+        "scenes",
+        "nivpjax/_scene/switching.py",
+        "return jnp.asarray(self.signal(t, x, args)) - lam",
+        "return lam - jnp.asarray(self.signal(t, x, args))",
+        "Saturation's docstring: sigma = clip(u, l, h) through the VI <sigma - u, eta - "
+        "sigma> >= 0",
+        ("tests/test_scenes_switching.py::test_chua_kinks",),
+    ),
+    Mutant(
+        "diode_surface_with_current",
+        "scenes",
+        "nivpjax/_scene/switching.py",
+        "return jnp.atleast_1d(self.voltage(t, x, jnp.zeros(self.n, y.dtype), args))",
+        "return jnp.atleast_1d(self.voltage(t, x, y[self.n_states :], args))",
+        "_DiodeSurface: the voltage each diode would see without current changes sign at a "
+        "switch (with the current it is zero while conducting)",
+        (
+            "tests/test_scenes_switching.py::test_rectifier_conduction_intervals",
+            TS + "test_rectifier_derivative_after_a_step_over_the_turn_off",
+        ),
+    ),
+    Mutant(
+        "contact_impulses_without_inverse_mass",
+        "scenes",
+        "nivpjax/_scene/contact.py",
+        "return self.inverse_mass @ self.normals(t, y, args).T",
+        "return self.normals(t, y, args).T",
+        "Contact: the impulse map is M^-1 W (a stack of balls of different masses)",
+        (
+            "tests/test_scenes_mechanics.py::test_contact_impulses_follow_the_inverse_mass",
+            "tests/test_scenes_mechanics.py::test_stack_at_rest_carries_weight",
+            "tests/test_scenes_mechanics.py::test_stack_drop_ends_stacked",
+        ),
+    ),
+    Mutant(
+        "equation_rows_scaled_by_h",
+        "scenes",
+        "nivpjax/_model.py",
+        "alg_rho = jnp.where(self.equation_rows, self.tau, alg_rho)",
+        "alg_rho = jnp.where(self.equation_rows, alg_rho, alg_rho)",
+        "AbstractEffect's docstring: equation rows (O(1) sensitivity) are scaled rho = tau, "
+        "not tau / h",
+        (
+            "tests/test_scenes_switching.py::test_rectifier_currents",
+            TE + "test_estimate_sees_an_equation_row",
+        ),
+    ),
+    # ------------------------------------------------------------------- batched sweep
+    Mutant(
+        "batched_order_not_inverted",
+        "batched",
+        "nivpjax/_batched.py",
+        "inverse[order] = np.arange(size)",
+        "inverse[:] = order",
+        "solve_batched's docstring: results come back in the members' original order",
+        ("tests/test_batched.py::test_members_match_single_solves_in_original_order",),
+    ),
+    Mutant(
+        "batched_pad_short",
+        "batched",
+        "nivpjax/_batched.py",
+        "chunk = size if chunk_size is None else min(chunk_size, size)",
+        "chunk = size if chunk_size is None else max(chunk_size, size)",
+        "solve_batched's docstring: chunk_size members per chunk"
+        "; EQUIVALENT in results: one chunk instead of several changes only the cost",
+        ("tests/test_batched.py::test_members_match_single_solves_in_original_order",),
+    ),
+    Mutant(
+        "lockstep_waste_unsorted",
+        "batched",
+        "nivpjax/_batched.py",
+        'order = np.arange(size) if cost is None else np.argsort(np.asarray(cost), kind="stable")',
+        "order = np.arange(size)",
+        "lockstep_waste's docstring: measured with the same chunk_size and cost as the run",
+        ("tests/test_batched.py::test_members_match_single_solves_in_original_order",),
+    ),
+    # ----------------------------------------------------------------------- drop-in
+    Mutant(
+        "compat_h_down_default",
+        "compat",
+        "nivpjax/compat/solve_ivp_ns.py",
+        'factormin=min(float(aopts.get("h_down", 0.2)), 1.0)',
+        'factormin=min(float(aopts.get("h_down", 0.5)), 1.0)',
+        "solve_ivp_ns's docstring: h_down's default 0.2 (issue 29's survivor)",
+        (TC + "test_defaults_are_the_reference_ones",),
+    ),
+    Mutant(
+        "compat_pi3040_swapped",
+        "compat",
+        "nivpjax/compat/_options.py",
+        '"pi3040": (0.4, 0.3),',
+        '"pi3040": (0.3, 0.4),',
+        "the comment: presets (beta1, beta2) as beta1 = p + i, beta2 = -p (PI.3040: beta2 = -0.4)",
+        (TC + "test_defaults_are_the_reference_ones",),
+    ),
+    Mutant(
+        "compat_use_pi_default_off",
+        "compat",
+        "nivpjax/compat/solve_ivp_ns.py",
+        'elif aopts.get("use_PI", True):',
+        'elif aopts.get("use_PI", False):',
+        "solve_ivp_ns's docstring: use_PI (default on, as the reference) is PI.3040",
+        (TC + "test_defaults_are_the_reference_ones",),
+    ),
+    Mutant(
+        "compat_rho0_to_alpha_max",
+        "compat",
+        "nivpjax/compat/solve_ivp_ns.py",
+        'kw["alpha0"] = float(sopts["rho0"])',
+        'kw["alpha_max"] = float(sopts["rho0"])',
+        "the drop-in's option translation: the reference's rho0 is the VI's initial step",
+        (
+            TC + "test_given_options_arrive_where_the_reference_reads_them",
+            TC + "test_defaults_are_the_reference_ones",
+            TC + "test_spring_slider",
+        ),
+    ),
+    Mutant(
+        "compat_gap_tol_sign",
+        "compat",
+        "nivpjax/compat/solve_ivp_ns.py",
+        "gap=lambda t, y, a: jnp.atleast_1d(gap(t, y)) - gap_tol,",
+        "gap=lambda t, y, a: jnp.atleast_1d(gap(t, y)) + gap_tol,",
+        "the drop-in's option translation: gap_tol shifts the contact (the reference "
+        "enforces gap >= gap_tol)",
+        (
+            TC + "test_bouncing_ball",
+            TC + "test_given_options_arrive_where_the_reference_reads_them",
+            TC + "test_defaults_are_the_reference_ones",
+        ),
+    ),
+    Mutant(
+        "compat_method_order_off_by_one",
+        "compat",
+        "nivpjax/compat/solve_ivp_ns.py",
+        "error_order=None if order is None else int(order) + 1,",
+        "error_order=None if order is None else int(order),",
+        "the drop-in's option translation: the reference's method_order p controls with "
+        "exponent 1/(p + 1)",
+        (
+            TC + "test_given_options_arrive_where_the_reference_reads_them",
+            TC + "test_defaults_are_the_reference_ones",
+        ),
+    ),
+    Mutant(
+        "compat_theta_default",
+        "compat",
+        "nivpjax/compat/solve_ivp_ns.py",
+        'Theta(theta=float(iopts.get("theta", 0.5)), solver=solver)',
+        'Theta(theta=float(iopts.get("theta", 1.0)), solver=solver)',
+        "the drop-in's defaults are the reference's (theta 0.5)",
+        (TC + "test_defaults_are_the_reference_ones",),
+    ),
+    Mutant(
+        "compat_solver_tol_default",
+        "compat",
+        "nivpjax/compat/solve_ivp_ns.py",
+        'tol = float(sopts.get("tol", 1e-10))',
+        'tol = float(sopts.get("tol", 1e-8))',
+        "the drop-in's defaults are the reference's (solver tol 1e-10)",
+        (TC + "test_defaults_are_the_reference_ones",),
+    ),
+    Mutant(
+        "compat_vi_L_to_kappa",
+        "compat",
+        "nivpjax/compat/solve_ivp_ns.py",
+        'kw["nu"] = float(sopts["L"])',
+        'kw["kappa"] = float(sopts["L"])',
+        "the drop-in's option translation: the reference's L is the VI's acceptance threshold nu",
+        (
+            TC + "test_given_options_arrive_where_the_reference_reads_them",
+            TC + "test_defaults_are_the_reference_ones",
+        ),
+    ),
+]
