@@ -940,14 +940,50 @@ MUTANTS = [
         ),
     ),
     Mutant(
-        "interpolation_projected_rows_hermite",
+        "interpolation_unprojected_rates",
         "controllers",
         "nivpjax/_loop.py",
-        "y = jnp.where(model.algebraic | projected, linear, hermite)",
-        "y = jnp.where(model.algebraic, linear, hermite)",
-        "the comment: rows a projector moves are interpolated linearly (a stuck slider's "
-        "velocity would bulge by k V h^2/8)",
-        ("tests/test_scenes_mechanics.py::test_slider_outputs_inside_a_long_stick",),
+        "y = cubic_hermite(y0, y1, h * p0, h * p1, w)",
+        "y = cubic_hermite(y0, y1, h * r0, h * r1, w)",
+        "interpolate's docstring: rows a projector moves take the rates the state has "
+        "(zero normal motion at a held face, friction's reaction added), not f's",
+        (
+            "tests/test_interpolation_order.py::test_sweeping_teval_as_right_as_the_steps",
+            "tests/test_scenes_mechanics.py::test_slider_outputs_inside_a_long_stick",
+        ),
+    ),
+    Mutant(
+        "theta_departure_uncharged",
+        "steppers",
+        "nivpjax/_stepper/one_leg.py",
+        "            e = jnp.where(jnp.abs(left) > jnp.abs(e), left, e)\n",
+        "",
+        "departure_error: a trapezoidal step ending on a face its row left inside it is "
+        "otherwise charged nothing (errors falling like rtol^(1/2) on the sweeping process)",
+        ("tests/test_reliability.py::test_departures_from_a_face_keep_the_error_proportional",),
+    ),
+    Mutant(
+        "bathe_departure_sign",
+        "steppers",
+        "nivpjax/_stepper/departure.py",
+        "(y1 - y0) - 0.5 * h * r1 * r1 / span",
+        "(y1 - y0) + 0.5 * h * r1 * r1 / span",
+        "departure_error: the computed motion minus the exact one since t_d (Bathe's "
+        "backward-difference stage moves the row h f1 / c3 off the face)",
+        (
+            "tests/test_estimates.py::test_departure_error_is_the_computed_minus_the_exact_motion",
+            "tests/test_reliability.py::test_departures_from_a_face_keep_the_error_proportional",
+        ),
+    ),
+    Mutant(
+        "betr_blind_on_held_rows",
+        "steppers",
+        "nivpjax/_stepper/embedded_betr.py",
+        "        error = _held_rows_error(model, t1, h, y_be, f0, error, args)\n",
+        "",
+        "EmbeddedBETR's docstring: both stages return a face that holds the row at both "
+        "ends of a step (the sweeping process: one step over a departure and return)",
+        ("tests/test_interpolation_order.py::test_sweeping_teval_as_right_as_the_steps",),
     ),
     Mutant(
         "interpolation_without_saltation_shift",

@@ -180,3 +180,32 @@ def test_estimate_sees_an_equation_row(name, rectifier):
     for e in (np.abs(true), np.abs(est)):
         measured = np.log2(e[-2] / e[-1])
         assert abs(measured - order) <= 0.2, (measured, order)
+
+
+def test_departure_error_is_the_computed_minus_the_exact_motion():
+    # z' = c (t - t_d) in the box [-1, 1], held at -1 while the field pushes out (t < t_d):
+    # from t0 on the face, the exact state at t1 is -1 + c (t1 - t_d)^2 / 2. The charge is
+    # the computed state minus that, whether the step ended on the face (the trapezoidal
+    # rule) or moved off it (Bathe's backward-difference stage); zero with no departure.
+    from nivpjax._stepper.departure import departure_error
+
+    c, t0, h, td = 2.0, 0.3, 0.5, 0.45
+    t1 = t0 + h
+
+    def field(t, y, args):
+        return c * (t - td) * jnp.ones_like(y)
+
+    box = nj.BlockProjector([([0], nj.Box(-1.0, 1.0))])
+    model = Model.build(field, box, None, np.zeros(1, bool))
+    assert model.has_held_rows
+    y0 = jnp.array([-1.0])
+    exact = -1.0 + 0.5 * c * (t1 - td) ** 2
+
+    def charge(y0, y1, ta=t0):
+        f0, f1 = field(ta, y0, None), field(ta + h, y1, None)
+        return float(departure_error(model, ta, h, y0, y1, f0, f1, None)[0])
+
+    for y1 in (-1.0, -0.8):
+        np.testing.assert_allclose(charge(y0, jnp.array([y1])), y1 - exact, rtol=1e-12)
+    assert charge(y0, jnp.array([-1.0]), ta=-0.3) == 0.0  # pushed out at both ends: held
+    assert charge(jnp.array([0.0]), jnp.array([0.1])) == 0.0  # free at the start

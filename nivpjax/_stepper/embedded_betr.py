@@ -76,11 +76,11 @@ def _held_rows_error(model, t1, h, y_be, f0, error, args):
     in between: measured on Moreau's sweeping process (a box on a differential row, rtol
     1e-5), one step from t = 0.9 to 4.0 over a departure from the face and a return to it,
     a `successful` run 1.8 off. The vector field's change still sees such a step."""
-    n = y_be.shape[0]
-    static = np.asarray(model.projector.acts_on(n), bool)
-    static = static & ~np.asarray(model.projector.weighed_rows(n), bool)
-    if not static.any():
+    if not model.has_held_rows:  # no such rows (contacts' and friction's are not)
         return error
+    n = y_be.shape[0]
+    static = np.asarray(model.rated_rows, bool)
+    static = static & ~np.asarray(model.projector.weighed_rows(n), bool)
     rows = jnp.asarray(static) & ~model.algebraic
     blind = model.to_state(0.5 * h * (model.f(t1, y_be, args) - f0))
     larger = rows & (jnp.abs(blind) > jnp.abs(error))
