@@ -80,8 +80,14 @@ def _sweep(stepper, params, rtols):
     return jax.vmap(one)(pp, rr)
 
 
-@pytest.mark.parametrize("solver", list(SOLVERS))
-@pytest.mark.parametrize("stepper", list(STEPPERS))
+# Every stepper with semismooth Newton (the default), and FixedPointVI with backward Euler:
+# the VI iteration reports failures on most draws with every stepper, so its other four
+# pairings tested little for a compile each (the campaign, `benchmarks.reliability`, runs
+# every pairing on its spiral family).
+PAIRS = [(name, "newton") for name in STEPPERS] + [("be", "vi")]
+
+
+@pytest.mark.parametrize("stepper, solver", PAIRS)
 def test_invariant_or_failure_code(stepper, solver):
     ts, ys, success, n_acc = _sweep(
         STEPPERS[stepper](SOLVERS[solver]), jnp.asarray(PARAMS), jnp.asarray(RTOLS)
