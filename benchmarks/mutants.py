@@ -548,6 +548,7 @@ MUTANTS = [
         "state_rate's docstring: a jump of the multipliers is not smooth flow; the secant "
         "would explain it away (issue 29's survivor)",
         (
+            TE + "test_theta_estimate_charges_a_switch_inside_the_step",
             TE + "test_estimate_tracks_local_error",
             TE + "test_estimate_sees_an_equation_row",
             "tests/test_filippov.py::test_invariant_or_failure_code[tr-newton]",
