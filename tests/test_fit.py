@@ -107,3 +107,24 @@ def test_fit_bad_input(kwargs, error, match):
 def test_fit_bad_params0():
     with pytest.raises(TypeError, match="`params0`"):
         nj.fit(lambda p, a: p, jnp.arange(3))
+
+
+@pytest.mark.parametrize(
+    "solver",
+    [
+        optx.GaussNewton(rtol=1e-10, atol=1e-10),  # history read off the solver's state
+        optx.BestSoFarLeastSquares(optx.LevenbergMarquardt(rtol=1e-10, atol=1e-10)),  # evaluated
+    ],
+)
+def test_fit_history_ends_at_the_cost_of_the_result(solver):
+    # Rosenbrock's residuals (minimum 0 at (1, 1)): no solve, so both ways of filling the
+    # history are checked against the cost of the returned parameters.
+    def residuals(p, args):
+        return jnp.stack([10 * (p[1] - p[0] ** 2), 1 - p[0]])
+
+    out = nj.fit(residuals, jnp.array([-1.2, 1.0]), solver=solver, max_steps=200, sigma=1.0)
+    steps = int(out.steps)
+    history = np.asarray(out.history)
+    expected = 0.5 * np.sum(np.asarray(residuals(out.params, None)) ** 2)
+    np.testing.assert_allclose(history[steps], expected, rtol=1e-10, atol=1e-30)
+    np.testing.assert_allclose(out.params, [1.0, 1.0], atol=1e-6)
