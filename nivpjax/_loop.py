@@ -398,7 +398,7 @@ def _in_step(model: Model, t, w, t0, y0, t1, y1, args):
         return jnp.where(model.algebraic | projected, linear, hermite)
     p0, held0 = model.projected_rate(t0, h, y0, f0, args)
     p1, held1 = model.projected_rate(t1, h, y1, f1, args)
-    sets = jnp.asarray(model.rated_rows) & ~model.algebraic & ~model.weighed
+    sets = model.held_rows
     y = cubic_hermite(y0, y1, h * p0, h * p1, w)
     a0 = _rate_change(model, t0, y0, r0, args)
     a1 = _rate_change(model, t1, y1, r1, args)

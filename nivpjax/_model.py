@@ -322,6 +322,13 @@ class Model(eqx.Module):
             return np.zeros(n, bool)
         return np.asarray(self.projector.acts_on(n), bool)
 
+    @property
+    def held_rows(self):
+        """The differential rows a set can hold at a face (a mask): the `rated_rows` that
+        are neither algebraic nor a proximal map's (`weighed`). Empty unless
+        `has_held_rows`."""
+        return jnp.asarray(self.rated_rows) & ~self.algebraic & ~self.weighed
+
     def projected_rate(self, t, h, y, f, args):
         """`(rate, held)` at `(t, y)` under the vector field's value `f` there: the rate
         (state units) the state takes from there, `f` projected (`_prox_rate`) on the

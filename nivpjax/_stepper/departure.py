@@ -1,7 +1,6 @@
 """The error of a step inside which a set lets go of a row it held at a face."""
 
 import jax.numpy as jnp
-import numpy as np
 
 
 def departure_error(model, t0, h, y0, y1, f0, f1, args):
@@ -27,9 +26,7 @@ def departure_error(model, t0, h, y0, y1, f0, f1, args):
     (`Model.has_held_rows`)."""
     if not model.has_held_rows:
         return jnp.zeros_like(y1)
-    n = y1.shape[0]
-    static = np.asarray(model.rated_rows, bool) & ~np.asarray(model.projector.weighed_rows(n))
-    rows = jnp.asarray(static) & ~model.algebraic
+    rows = model.held_rows
     _, held = model.projected_rate(t0, h, y0, jnp.where(rows, f0, 0.0), args)
     _, held_end = model.projected_rate(t0 + h, h, y1, jnp.where(rows, f1, 0.0), args)
     r0, r1 = model.to_state(f0), model.to_state(f1)

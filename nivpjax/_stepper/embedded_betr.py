@@ -2,7 +2,6 @@
 
 import equinox as eqx
 import jax.numpy as jnp
-import numpy as np
 
 from .._nonlinear import AbstractNonlinearSolver
 from .._solution import StepStats
@@ -78,10 +77,6 @@ def _held_rows_error(model, t1, h, y_be, f0, error, args):
     a `successful` run 1.8 off. The vector field's change still sees such a step."""
     if not model.has_held_rows:  # no such rows (contacts' and friction's are not)
         return error
-    n = y_be.shape[0]
-    static = np.asarray(model.rated_rows, bool)
-    static = static & ~np.asarray(model.projector.weighed_rows(n), bool)
-    rows = jnp.asarray(static) & ~model.algebraic
     blind = model.to_state(0.5 * h * (model.f(t1, y_be, args) - f0))
-    larger = rows & (jnp.abs(blind) > jnp.abs(error))
+    larger = model.held_rows & (jnp.abs(blind) > jnp.abs(error))
     return jnp.where(larger, blind, error)
