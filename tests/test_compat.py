@@ -243,6 +243,22 @@ DEFAULTS_THAT_DIFFER = {
 }
 
 
+def _solver_pairs(vi, ref_vi, newton, ref_newton):
+    """The solver options as each side holds them: `{option: (ours, the reference's)}`."""
+    return {
+        "tol": (vi.rtol, ref_vi.tol),
+        "tol (atol)": (vi.atol, ref_vi.tol),
+        "max_iter": (vi.max_steps, ref_vi.max_iter),
+        "rho0": (vi.alpha0, ref_vi.rho0),
+        "L": (vi.nu, ref_vi.L),
+        "newton tol": (newton.rtol, ref_newton.tol),
+        "newton max_iter": (newton.max_steps, ref_newton.max_iter),
+        "ls_c1": (newton.sigma, ref_newton.ls_c1),
+        "ls_beta": (newton.beta, ref_newton.ls_beta),
+        "max_backtracks": (newton.max_backtracks, ref_newton.max_backtracks),
+    }
+
+
 def test_defaults_are_the_reference_ones(monkeypatch):
     """Option by option, what an omitted option means in the drop-in and in the reference
     (read from the reference's own signatures and objects, not written down twice)."""
@@ -280,16 +296,7 @@ def test_defaults_are_the_reference_ones(monkeypatch):
         "use_PI previous": (ctrl.pcoeff / k, ref_ctrl._beta_PI),
         "method_order": (stepper.error_order, k),
         # solver_opts
-        "tol": (vi.rtol, ref_vi.tol),
-        "tol (atol)": (vi.atol, ref_vi.tol),
-        "max_iter": (vi.max_steps, ref_vi.max_iter),
-        "rho0": (vi.alpha0, ref_vi.rho0),
-        "L": (vi.nu, ref_vi.L),
-        "newton tol": (newton.rtol, ref_newton.tol),
-        "newton max_iter": (newton.max_steps, ref_newton.max_iter),
-        "ls_c1": (newton.sigma, ref_newton.ls_c1),
-        "ls_beta": (newton.beta, ref_newton.ls_beta),
-        "max_backtracks": (newton.max_backtracks, ref_newton.max_backtracks),
+        **_solver_pairs(vi, ref_vi, newton, ref_newton),
         # integrator_opts (the reference's composite scheme has its stage at h/2)
         "gamma": (stepper.gamma, 0.5),
         "theta": (theta.theta, ref.ThetaMethod(solver=ref_vi).theta),
@@ -317,18 +324,7 @@ def test_given_options_arrive_where_the_reference_reads_them(monkeypatch):
     vi = _handed_to_solve(monkeypatch, solver_opts=vi_opts)["stepper"].solver
     seen = _handed_to_solve(monkeypatch, solver=newton_name, solver_opts=newton_opts)
     newton = seen["stepper"].solver
-    pairs = {
-        "tol": (vi.rtol, ref_vi.tol),
-        "tol (atol)": (vi.atol, ref_vi.tol),
-        "max_iter": (vi.max_steps, ref_vi.max_iter),
-        "rho0": (vi.alpha0, ref_vi.rho0),
-        "L": (vi.nu, ref_vi.L),
-        "newton tol": (newton.rtol, ref_newton.tol),
-        "newton max_iter": (newton.max_steps, ref_newton.max_iter),
-        "ls_c1": (newton.sigma, ref_newton.ls_c1),
-        "ls_beta": (newton.beta, ref_newton.ls_beta),
-        "max_backtracks": (newton.max_backtracks, ref_newton.max_backtracks),
-    }
+    pairs = _solver_pairs(vi, ref_vi, newton, ref_newton)
     # adaptive_opts: the reference sets its stepper's attributes to the given values; a
     # method_order p makes it control with the error order p + 1 and the PI exponent
     # 0.7 / (p + 1) on the current error.

@@ -32,6 +32,25 @@ def _args(e=0.7):
     return {"e": jnp.asarray(e), "g": jnp.asarray(9.81)}
 
 
+def _unit_step_info(y_error, order):
+    """A successful step of size 1 from t = 0 (t1 = 10) at y = 0, one component: with
+    atol = 1 the scaled error is `y_error` itself."""
+    zero = jnp.zeros(1)
+    return nv.StepInfo(
+        t0=jnp.array(0.0),
+        h=jnp.array(1.0),
+        t1=jnp.array(10.0),
+        y0=zero,
+        y1=zero,
+        y_error=y_error,
+        error_order=order,
+        stats=nv.StepStats(jnp.array(1), jnp.array(0.0), nv.RESULTS.successful),
+        error_mask=jnp.ones(1, bool),
+        violation=jnp.array(0.0),
+        next_event=jnp.array(jnp.inf),
+    )
+
+
 def test_pid_factors_match_diffrax_with_derivative_gain():
     # The same recorded error sequence through both controllers, with all three gains
     # nonzero: every step-size factor agrees with diffrax's PIDController. The sequence
@@ -45,7 +64,6 @@ def test_pid_factors_match_diffrax_with_derivative_gain():
     theirs = diffrax.PIDController(rtol=1e-3, atol=1.0, **gains)
     order = 3
     zero = jnp.zeros(1)  # y = 0: the scaled error is the error itself (atol = 1)
-    stats = nv.StepStats(jnp.array(1), jnp.array(0.0), nv.RESULTS.successful)
     state_ours = (jnp.array(1.0), jnp.array(1.0), jnp.array(False))
     state_theirs = (jnp.array(1.0), jnp.array(1.0), jnp.array(False))
     adapt_ours = jax.jit(lambda info, state: ours.adapt(info, state))
@@ -54,19 +72,7 @@ def test_pid_factors_match_diffrax_with_derivative_gain():
     )
     for error in [0.5, 0.05, 0.02, 1e-3, 8e-4, 1e-4, 6e-5, 1e-6]:
         y_error = jnp.array([error])
-        info = nv.StepInfo(
-            t0=jnp.array(0.0),
-            h=jnp.array(1.0),
-            t1=jnp.array(10.0),
-            y0=zero,
-            y1=zero,
-            y_error=y_error,
-            error_order=order,
-            stats=stats,
-            error_mask=jnp.ones(1, bool),
-            violation=jnp.array(0.0),
-            next_event=jnp.array(jnp.inf),
-        )
+        info = _unit_step_info(y_error, order)
         accept, factor, state_ours = adapt_ours(info, state_ours)
         keep, t0, t1, _, state_theirs, _ = adapt_theirs(y_error, state_theirs)
         assert bool(accept) and bool(keep)
@@ -197,22 +203,9 @@ def test_pid_error_order_overrides_the_steppers():
     ours = nv.PIDController(rtol=1e-3, atol=1.0, event_prediction=False, error_order=2)
     theirs = diffrax.PIDController(rtol=1e-3, atol=1.0)
     zero = jnp.zeros(1)
-    stats = nv.StepStats(jnp.array(1), jnp.array(0.0), nv.RESULTS.successful)
     state = (jnp.array(1.0), jnp.array(1.0), jnp.array(False))
     error = jnp.array([1e-3])
-    info = nv.StepInfo(
-        t0=jnp.array(0.0),
-        h=jnp.array(1.0),
-        t1=jnp.array(10.0),
-        y0=zero,
-        y1=zero,
-        y_error=error,
-        error_order=3,
-        stats=stats,
-        error_mask=jnp.ones(1, bool),
-        violation=jnp.array(0.0),
-        next_event=jnp.array(jnp.inf),
-    )
+    info = _unit_step_info(error, 3)
     _, factor, _ = ours.adapt(info, state)
     _, t0, t1, *_ = theirs.adapt_step_size(0.0, 1.0, zero, zero, None, error, 2, state)
     np.testing.assert_allclose(factor, t1 - t0, rtol=1e-13)
