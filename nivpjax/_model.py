@@ -339,14 +339,56 @@ class Model(eqx.Module):
         (float32: a state at a face would then read as inside the set, free)."""
         if not self.rated_rows.any():
             return self.to_state(f), jnp.zeros(y.shape, bool)
+        moved, rows = self._moved_rate(t, h, y, f, args)
+        return self.to_state(moved), rows & (moved != f)
+
+    def _moved_rate(self, t, h, y, f, args):
+        # `f` projected on the differential rated rows (units of f), and those rows.
         rows = jnp.asarray(self.rated_rows) & ~self.algebraic
         f_rows = jnp.where(rows, f, 0.0)
         finfo = jnp.finfo(y.dtype)
         speed = jnp.max(jnp.abs(f_rows)) / (1 + jnp.max(jnp.abs(y)))
         h = jnp.where(h > 0, h, 1.0)
         s = jnp.clip(64 * finfo.eps / jnp.maximum(speed, finfo.tiny), 1e-6 * h, 1e-2 * h)
-        moved = jnp.where(rows, self._prox_rate(t, s, y, f_rows, args), f)
-        return self.to_state(moved), rows & (moved != f)
+        return jnp.where(rows, self._prox_rate(t, s, y, f_rows, args), f), rows
+
+    def reaction_at(self, t, h, y, args):
+        r"""The constraint reaction at the state `(t, y)` (units of $f$; a row of the
+        `multipliers` buffer's instantaneous counterpart), inside its set:
+
+        - on the differential `rated_rows`, the projected rate minus the vector field
+          (`_moved_rate`): zero where the row is free, $-f$ on the normal rows where a set
+          holds the state at a face (exactly: the projection's derivative there is 0),
+          the law's reaction on a proximal map's rows (friction: $-c \operatorname{sign} v$
+          in slip, the holding force in stick), put back into its bound
+          (`project_reaction`);
+        - on algebraic rows, the row's residual $-f(t, y)$, as in the buffer;
+        - zero on the other rows.
+
+        `h` only sets the JVP's point (see `projected_rate`)."""
+        f = self.f(t, y, args)
+        out = jnp.where(self.algebraic, -f, 0.0)
+        if not self.rated_rows.any():
+            return out
+        moved, rows = self._moved_rate(t, h, y, f, args)
+        reaction = jnp.where(rows, moved - f, out)
+        if self.has_weighed:
+            reaction = self.project_reaction(t, y, reaction, args)
+        return reaction
+
+    def project_reaction(self, t, y, r, args):
+        r"""`r` with the rows of a proximal map (`weighed`: friction) put into the map's
+        reaction set at `(t, y)` by the projector itself, through Moreau's decomposition
+        at unit weight: with $P$ the map $P(z) = z - \operatorname{proj}_C(z)$ (friction:
+        soft thresholding by the bound $c$, $C$ its interval or disk),
+        $\operatorname{proj}_C(r) = r - P(r)$. Applied twice: the first leaves $r$ within
+        round-off of $C$, the second puts it inside an interval bit for bit (a value an
+        ulp past $c$ comes back as $c$ exactly, by Sterbenz's lemma)."""
+        ctx = ProjectionContext(
+            t=t, h=jnp.ones_like(t), y_prev=y, y_iter=y, rho=jnp.ones_like(y), args=args
+        )
+        inner = lambda v: v - self.projector(jnp.where(self.weighed, v, y), ctx)  # noqa: E731
+        return jnp.where(self.weighed, inner(inner(r)), r)
 
     def project_rows(self, t, h, y, rows, args):
         """`y` with the rows `rows` (a boolean mask) replaced by the projector's value at

@@ -11,7 +11,7 @@ import numpy as np
 from . import _validate as v
 from ._cache import CachedJit
 from ._controller import AbstractController
-from ._loop import interpolate, run
+from ._loop import interpolate, interpolate_multipliers, run
 from ._model import Model
 from ._progress_meter import progress_callback
 from ._projector import AbstractProjector
@@ -206,10 +206,11 @@ def _solve_impl(
         checkpoints,
     )
     if t_eval is not None:
+        y_eval = interpolate(sol, t_eval, model, args)
         sol = eqx.tree_at(
-            lambda s: (s.t_eval, s.y_eval),
+            lambda s: (s.t_eval, s.y_eval, s.multipliers_eval),
             sol,
-            (t_eval, interpolate(sol, t_eval, model, args)),
+            (t_eval, y_eval, interpolate_multipliers(sol, t_eval, y_eval, model, args)),
             is_leaf=lambda x: x is None,
         )
     if throw_inside:
