@@ -33,6 +33,9 @@ SAMPLES = 8
 # A held row's hidden constraint determines its multiplier where G's dependence on the
 # multipliers is at least this fraction of |d sigma/dx| |dx'/dw| (see `_linearisation`).
 DETERMINED = 1e-3
+# The selection rows' scaling in the equivalent control of an output time, relative to
+# a stage's (see `selections_inside`).
+EQUIVALENT_SCALE = 1e-6
 
 
 def held_exit(model, t1, h, y0, y1, rate0, rate1, args):
@@ -208,8 +211,14 @@ def selections_inside(model, t, t0, y0, t1, y1, y, args):
     h = jnp.where(t1 > t0, t1 - t0, 1.0)
     project, sigma = _maps(model, h, args)
     held0, held1 = _held(model, sigma, t0, y0), _held(model, sigma, t1, y1)
-    on, J, _ = _linearisation(model, sigma, held0 | held1, t, y, args)
-    y_eq = _newton(model, sigma, on, J, t, y, args)
+    # The hidden constraint read with the selection rows' scaling shrunk (G = 0 does not
+    # depend on it where nothing clips): a state off the surface by the interpolant's
+    # error, or after the phase ends, would clip the stage's resolvent and leave G
+    # without its dependence on w (measured: a relay leaving sliding inside a step,
+    # w = -0.993 where the equivalent control is -1.03).
+    _, sigma_eq = _maps(model, h / EQUIVALENT_SCALE, args)
+    on, J, _ = _linearisation(model, sigma_eq, held0 | held1, t, y, args)
+    y_eq = _newton(model, sigma_eq, on, J, t, y, args)
     y_eq = jnp.where(jnp.isfinite(y_eq), y_eq, y)
     eq = project(t, y_eq)
     inside = jnp.abs(eq - y_eq) <= _band(y_eq)

@@ -381,14 +381,15 @@ class Model(eqx.Module):
         reaction set at `(t, y)` by the projector itself, through Moreau's decomposition
         at unit weight: with $P$ the map $P(z) = z - \operatorname{proj}_C(z)$ (friction:
         soft thresholding by the bound $c$, $C$ its interval or disk),
-        $\operatorname{proj}_C(r) = r - P(r)$. Applied twice: the first leaves $r$ within
-        round-off of $C$, the second puts it inside an interval bit for bit (a value an
-        ulp past $c$ comes back as $c$ exactly, by Sterbenz's lemma)."""
+        $\operatorname{proj}_C(r) = r - P(r)$. On an interval this is exact for a value
+        within a factor 2 of the bound (Sterbenz's lemma: $P(r) = r \mp c$ without
+        rounding), as a reaction computed as $(F - c) - F$ is: it comes back as $\mp c$ bit
+        for bit, where it could lie half an ulp of $F$ past the bound."""
         ctx = ProjectionContext(
             t=t, h=jnp.ones_like(t), y_prev=y, y_iter=y, rho=jnp.ones_like(y), args=args
         )
-        inner = lambda v: v - self.projector(jnp.where(self.weighed, v, y), ctx)  # noqa: E731
-        return jnp.where(self.weighed, inner(inner(r)), r)
+        moreau = r - self.projector(jnp.where(self.weighed, r, y), ctx)
+        return jnp.where(self.weighed, moreau, r)
 
     def project_rows(self, t, h, y, rows, args):
         """`y` with the rows `rows` (a boolean mask) replaced by the projector's value at
