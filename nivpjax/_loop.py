@@ -337,7 +337,10 @@ def interpolate(sol: Solution, t_eval, model: Model | None = None, args=None):
     start it (`Model.step_start`: the impacts closing at its start applied, the
     right-limit selections there), by the cubic Hermite interpolant of the two end states
     and rates (third order: local error $O(h^4)$; exact for a ball's parabola, whose
-    steps event prediction makes long), linearly on algebraic rows (multipliers).
+    steps event prediction makes long), linearly on algebraic rows (multipliers), except
+    selection rows, which take the selection of their phase at `t`
+    (`_held.selections_inside`: a sliding mode's equivalent control, split where the
+    phase begins or ends inside the step).
 
     On rows a projector moves (`Model.rated_rows`), the rates are the ones the state
     takes (`Model.projected_rate`: zero normal motion where a set holds a row at a

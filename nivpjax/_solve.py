@@ -80,8 +80,9 @@ def solve(
     - `t_eval`: optional output times in $[t_0, t_1]$; the solution there is interpolated
       into `Solution.y_eval`: cubic Hermite on differential rows, from each step's start as
       the stepper took it, with the projected rates on rows a set constrains and each value
-      projected back into its set; linear on algebraic rows (see
-      `nivpjax._loop.interpolate` and the error-control page).
+      projected back into its set; selections (a relay's $w$) by the phase they are in,
+      other algebraic rows linear (see `nivpjax._loop.interpolate` and the error-control
+      page). The constraint reactions there go into `Solution.multipliers_eval`.
     - `max_steps`: bound on attempted steps; buffers have `max_steps + 1` rows.
     - `error_estimate`: `"auto"` uses the stepper's embedded estimate when it has one and
       Richardson step doubling otherwise; `"richardson"` forces step doubling.
