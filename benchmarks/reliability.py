@@ -95,13 +95,14 @@ def q_of(order):
 N_EVAL = 401
 
 
-def compiled_run(family, stepper, solver, control):
+def compiled_run(family, stepper, solver, control, outputs=False):
     """One jitted solve per configuration: `run(x0, args, rtol) -> (Solution, outside)`
-    (the parameters of the grid are run-time inputs), with `N_EVAL` output times and the
-    largest distance of an output value from its set (`outside_of_sets`)."""
+    (the parameters of the grid are run-time inputs); with `outputs`, `N_EVAL` output
+    times and the largest distance of an output value from its set (`outside_of_sets`),
+    else no output times and `outside` NaN."""
     scene, _, _ = family.make(family.grid[0])
     step = STEPPERS[stepper][0](solver=SOLVERS[solver]())
-    t_eval = jnp.linspace(0.0, family.t1, N_EVAL)
+    t_eval = jnp.linspace(0.0, family.t1, N_EVAL) if outputs else None
 
     def run(x0, args, rtol):
         sol = scene.solve(
@@ -115,6 +116,8 @@ def compiled_run(family, stepper, solver, control):
             throw=False,
             t_eval=t_eval,
         )
+        if not outputs:
+            return sol, jnp.full((), jnp.nan, sol.ys.dtype)
         return sol, outside_of_sets(scene, sol, args)
 
     return scene, jax.jit(run)
@@ -175,7 +178,7 @@ def teval_ratio(family, params, scene, sol, ts, xs, rtol):
 def run_one(family, scene, run, params, rtol):
     """`dict` of one run: result, error, steps, seconds, the `t_eval` ratio
     (`teval_ratio`) and the largest distance of an output value from its set
-    (`outside_of_sets`)."""
+    (`outside_of_sets`); both NaN for a run without output times."""
     _, x0, args = family.make(params)
     t0 = time.perf_counter()
     sol, outside = jax.block_until_ready(run(x0, args, rtol))
@@ -186,7 +189,7 @@ def run_one(family, scene, run, params, rtol):
     xs, _ = scene.split(np.asarray(sol.ys[: k + 1]))
     error = family.error(params, ts, xs) if ok else np.nan
     ratio = np.nan
-    if ok:
+    if ok and sol.t_eval is not None:
         ratio = teval_ratio(family, params, scene, sol, ts, xs, rtol)
     return dict(
         ok=ok,
@@ -242,7 +245,7 @@ def campaign(families, steppers, solvers, controls, rtols, grid_slice, log=print
 def run_config(family, stepper, solver, control, rtols, grid_slice):
     """The judged runs of one configuration over its grid points and tolerances."""
     order = STEPPERS[stepper][1]
-    scene, run = compiled_run(family, stepper, solver, control)
+    scene, run = compiled_run(family, stepper, solver, control, outputs=True)
     rows = []
     for g, params in enumerate(family.grid[grid_slice]):
         runs = []

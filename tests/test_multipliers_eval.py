@@ -282,3 +282,40 @@ def test_friction_reaction_put_into_its_bound_bit_for_bit():
     assert np.any(np.abs(raw) > c)  # the case exists: rounding past the bound
     assert np.all(np.abs(r) <= c)
     np.testing.assert_allclose(r, -c, rtol=1e-9)  # v > 0: the slip reaction -c
+
+
+# --- The campaign's checks of the outputs. ------------------------------------------------
+
+
+def test_campaign_output_checks_flag_values_outside_their_sets():
+    # `outside_of_sets` reads 0 on a run whose outputs are all feasible, and flags a state
+    # an ulp outside the box and a normal force of the wrong sign; `teval_ratio` meets the
+    # issue's target on the sweeping family.
+    from benchmarks import reliability as campaign
+    from benchmarks.families import FAMILIES
+
+    family = FAMILIES["sweeping"]
+    params = family.grid[0]
+    scene, run = campaign.compiled_run(family, "Bathe", "SSN", "default", outputs=True)
+    _, x0, args = family.make(params)
+    sol, outside = run(x0, args, 1e-4)
+    assert sol.result == nj.RESULTS.successful and float(outside) == 0.0
+    k = int(sol.n_accepted)
+    ts, xs = np.asarray(sol.ts[: k + 1]), np.asarray(sol.ys[: k + 1])
+    assert campaign.teval_ratio(family, params, scene, sol, ts, xs, 1e-4) <= 2.0
+
+    check = jax.jit(lambda sol: campaign.outside_of_sets(scene, sol, args))
+    z, r = sol.y_eval[:, 0], sol.multipliers_eval[:, 0]
+    face = int(np.flatnonzero((np.abs(np.asarray(z)) == 1.0) & (np.asarray(r) != 0.0))[0])
+    past = sol.y_eval.at[face, 0].set(np.nextafter(z[face], 2 * z[face]))
+    wrong_sign = sol.multipliers_eval.at[face, 0].set(-r[face])
+    assert float(check(sol)) == 0.0
+    assert float(check(eqx_replace(sol, y_eval=past))) > 0.0
+    assert float(check(eqx_replace(sol, multipliers_eval=wrong_sign))) > 0.0
+
+
+def eqx_replace(sol, **fields):
+    import equinox as eqx
+
+    names = list(fields)
+    return eqx.tree_at(lambda s: [getattr(s, n) for n in names], sol, [fields[n] for n in names])
