@@ -433,26 +433,21 @@ def interpolate_multipliers(sol: Solution, t_eval, y_eval, model: Model, args=No
     $f$ is an acceleration), each inside its set, from the states `y_eval` that
     `interpolate` gives there; NaN where `y_eval` is.
 
-    Without impulses, the reaction the interpolated state takes (`Model.reaction_at`):
-    it inherits the states' piecewise rule, so a phase that begins or ends inside a step
-    splits it where the states do (a face reached, a stick reached: the reaction is
-    zero, or the law's slip value, up to the instant the state arrives) and follows the
-    stepper's order elsewhere (a friction force in slip at the interpolated state; a
-    box's normal force $-f$ at the interpolated time). Contacts with impulses: the
-    reaction of the step holding each output time (the buffer's row: the step's average,
-    impulse / h in a step with an impact), which no rate at its ends describes."""
+    The reaction the interpolated state takes (`Model.reaction_at`): it inherits the
+    states' piecewise rule, so a phase that begins or ends inside a step splits it where
+    the states do (a face reached, a stick reached: the reaction is zero, or the law's
+    slip value, up to the instant the state arrives) and follows the stepper's order
+    elsewhere (a friction force in slip at the interpolated state; a box's normal force
+    $-f$ at the interpolated time). Contacts: zero in flight, the resting force where a
+    contact holds the body; an impact is an impulse, which no force at an instant
+    describes (the `multipliers` buffer's row of that step holds impulse / h)."""
     k = sol.n_accepted
     idx = jnp.searchsorted(sol.ts, t_eval, side="right") - 1
     idx = jnp.clip(idx, 0, jnp.maximum(k - 1, 0))
-    nxt = jnp.minimum(idx + 1, k)
-    if model.has_impulses:
-        out = sol.multipliers[nxt]
-    else:
-        span = sol.ts[nxt] - sol.ts[idx]
-        h = jnp.where(span > 0, span, 1.0)
-        safe_y = jnp.where(jnp.isfinite(y_eval), y_eval, 0.0)
-        at = jax.vmap(lambda t, h, y: model.reaction_at(t, h, y, args))
-        out = at(t_eval, h, safe_y)
+    span = sol.ts[jnp.minimum(idx + 1, k)] - sol.ts[idx]
+    h = jnp.where(span > 0, span, 1.0)
+    safe_y = jnp.where(jnp.isfinite(y_eval), y_eval, 0.0)
+    out = jax.vmap(lambda t, h, y: model.reaction_at(t, h, y, args))(t_eval, h, safe_y)
     return jnp.where(jnp.isnan(y_eval), jnp.nan, out)
 
 

@@ -339,12 +339,13 @@ class Model(eqx.Module):
         (float32: a state at a face would then read as inside the set, free)."""
         if not self.rated_rows.any():
             return self.to_state(f), jnp.zeros(y.shape, bool)
-        moved, rows = self._moved_rate(t, h, y, f, args)
+        moved, rows = self._moved_rate(t, h, y, f, args, self.rated_rows)
         return self.to_state(moved), rows & (moved != f)
 
-    def _moved_rate(self, t, h, y, f, args):
-        # `f` projected on the differential rated rows (units of f), and those rows.
-        rows = jnp.asarray(self.rated_rows) & ~self.algebraic
+    def _moved_rate(self, t, h, y, f, args, rows):
+        # `f` projected on the differential rows of the mask `rows` (units of f), and those
+        # rows.
+        rows = jnp.asarray(rows) & ~self.algebraic
         f_rows = jnp.where(rows, f, 0.0)
         finfo = jnp.finfo(y.dtype)
         speed = jnp.max(jnp.abs(f_rows)) / (1 + jnp.max(jnp.abs(y)))
@@ -356,21 +357,25 @@ class Model(eqx.Module):
         r"""The constraint reaction at the state `(t, y)` (units of $f$; a row of the
         `multipliers` buffer's instantaneous counterpart), inside its set:
 
-        - on the differential `rated_rows`, the projected rate minus the vector field
-          (`_moved_rate`): zero where the row is free, $-f$ on the normal rows where a set
-          holds the state at a face (exactly: the projection's derivative there is 0),
-          the law's reaction on a proximal map's rows (friction: $-c \operatorname{sign} v$
-          in slip, the holding force in stick), put back into its bound
-          (`project_reaction`);
+        - on the differential rows a projector acts on, the projected rate minus the
+          vector field (`_moved_rate`): zero where the row is free, $-f$ on the normal
+          rows where a set holds the state at a face (exactly: the projection's derivative
+          there is 0), the law's reaction on a proximal map's rows (friction:
+          $-c \operatorname{sign} v$ in slip, the holding force in stick), put into its
+          bound (`project_reaction`). On a contact's velocity rows: zero off contact, the
+          resting force where the contact holds the body (the one-sided derivative of its
+          impulse, $\ge 0$: a resting ball's $g$); an impact is an impulse, not a force,
+          and has none;
         - on algebraic rows, the row's residual $-f(t, y)$, as in the buffer;
         - zero on the other rows.
 
         `h` only sets the JVP's point (see `projected_rate`)."""
         f = self.f(t, y, args)
         out = jnp.where(self.algebraic, -f, 0.0)
-        if not self.rated_rows.any():
+        acts = np.asarray(self.projector.acts_on(y.shape[0]), bool)
+        if not acts.any():
             return out
-        moved, rows = self._moved_rate(t, h, y, f, args)
+        moved, rows = self._moved_rate(t, h, y, f, args, acts)
         reaction = jnp.where(rows, moved - f, out)
         if self.has_weighed:
             reaction = self.project_reaction(t, y, reaction, args)

@@ -68,13 +68,14 @@ class Solution(eqx.Module):
     - `multipliers_eval`: the constraint reactions at `t_eval` (as `multipliers`, units
       of $f$: a force, per unit mass where $f$ is an acceleration; never an impulse),
       each inside its set (a box's normal force at a face, zero off it; a friction force
-      within its bound, bit for bit on an interval), or `None`. Without impulses, the
-      reaction the interpolated state takes: the stepper's order inside a phase, split
-      where a phase begins or ends inside a step. Contacts with impulses: the step's
-      average (the buffer's row of the step holding the output time). Selections that
-      are states (a relay's $w$ on an algebraic row) are in `y_eval`, by the same rule:
-      the projected equivalent control in a sliding mode, the start's value until the
-      switching function changes sign, $|w| \\le 1$ bit for bit.
+      within its bound, bit for bit on an interval; a contact's force zero in flight and
+      the resting force where the contact holds the body), or `None`. They are the
+      reactions the interpolated state takes: the stepper's order inside a phase, split
+      where a phase begins or ends inside a step. An impact is an impulse and has no
+      force at an instant (the `multipliers` row of its step holds impulse / h).
+      Selections that are states (a relay's $w$ on an algebraic row) are in `y_eval`, by
+      the same rule: the projected equivalent control in a sliding mode, the start's
+      value until the switching function changes sign, $|w| \\le 1$ bit for bit.
     - `attempts`: an [`nivpjax.AttemptLog`][] or `None`.
     """
 
