@@ -84,8 +84,7 @@ def test_numpy_model_takes_the_steps_of_its_jax_numpy_twin(model, monkeypatch):
 
 def test_numpy_model_gradients_match_finite_differences():
     """Reverse and forward mode through a hosted model (a damped pendulum with a relay
-    torque, in NumPy) in the native solve, against central differences of the solve;
-    and `vmap` over the initial state against a loop."""
+    torque, in NumPy) in the native solve, against central differences of the solve."""
 
     def pendulum(t, y):
         return np.array([y[1], -np.sin(y[0]) - 0.3 * y[1] - 0.5 * np.tanh(5 * y[1])])
@@ -113,10 +112,37 @@ def test_numpy_model_gradients_match_finite_differences():
     tangent = np.array([0.3, -0.7])
     _, jvp = jax.jvp(lambda y: loss(y, "forward"), (y0,), (jnp.asarray(tangent),))
     assert float(jvp) == pytest.approx(fd @ tangent, rel=1e-6)
-    starts = np.array([[0.8, -0.2], [0.1, 1.0], [-1.2, 0.4]])
+
+
+def test_hosted_function_batches_and_differentiates():
+    """The hosted function itself: values, Jacobians (forward and reverse, in y and t) and
+    a Hessian (finite differences of finite differences) against the analytic ones, under
+    one and two levels of `vmap` (with an unbatched argument)."""
+
+    def f(t, y):
+        return np.array([y[1] * np.sin(t), -9.81 * y[0] ** 2])
+
+    def exact(t, y):
+        value = jnp.array([y[1] * jnp.sin(t), -9.81 * y[0] ** 2])
+        d_y = jnp.array([[0.0, jnp.sin(t)], [-19.62 * y[0], 0.0]])
+        d_t = jnp.array([y[1] * jnp.cos(t), 0.0])
+        return value, d_y, d_t
+
+    F = _host.adapt(f, "fun", "(t, y)", (0.0, np.zeros(2)), (2,))
+    ts = jnp.array([0.1, 0.7, 2.0])
+    ys = jnp.array([[0.3, -1.2], [1.5, 0.4], [-2.0, 3.0]])
+    value, d_y, d_t = jax.vmap(exact)(ts, ys)
+    np.testing.assert_allclose(jax.vmap(F)(ts, ys), value, rtol=1e-15)
     np.testing.assert_allclose(
-        jax.vmap(final)(starts), [final(s) for s in starts], rtol=0, atol=1e-12
+        jax.vmap(F, (None, 0))(0.7, ys), jax.vmap(exact, (None, 0))(0.7, ys)[0]
     )
+    np.testing.assert_allclose(jax.vmap(jax.jacfwd(F, 1))(ts, ys), d_y, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(jax.vmap(jax.jacrev(F, 1))(ts, ys), d_y, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(jax.vmap(jax.jacfwd(F, 0))(ts, ys), d_t, rtol=1e-9, atol=1e-9)
+    nested = jax.vmap(jax.vmap(F))(jnp.stack([ts, ts + 1]), jnp.stack([ys, 2 * ys]))
+    np.testing.assert_allclose(nested[1], jax.vmap(exact)(ts + 1, 2 * ys)[0], rtol=1e-15)
+    hessian = jax.hessian(lambda y: F(0.7, y)[1])(ys[0])
+    np.testing.assert_allclose(hessian, [[-19.62, 0.0], [0.0, 0.0]], atol=1e-4)
 
 
 def test_models_that_cannot_work_say_what_to_change():

@@ -6,6 +6,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._cache import CachedJit
 from .._controller import ConstantStepSize, PIDController
 from .._nonlinear import FixedPointVI, SemismoothNewton
 from .._projector import (
@@ -111,10 +112,11 @@ def _projector(name, popts, n, component_slices, t0, y0, hosted):
         # does: the other rows (positions) are then free rows, interpolated at `t_eval`
         # with their rates instead of linearly.
         idx = np.flatnonzero(rows)
+        cols = idx.tolist()  # a list in the closures: static indices, not a traced array
         contact = UnilateralContact(
             gap_fn,
-            lambda t, y, a: velocity_map(t, y, a)[:, idx],
-            lambda t, y, a: impulse_map(t, y, a)[idx],
+            lambda t, y, a: velocity_map(t, y, a)[:, cols],
+            lambda t, y, a: impulse_map(t, y, a)[cols, :],
             restitution=e,
         )
         return BlockProjector([(idx, contact)])
@@ -135,25 +137,31 @@ def _projector(name, popts, n, component_slices, t0, y0, hosted):
     return BlockProjector([(np.asarray(b, int), SecondOrderCone(mu_fn)) for b in blocks])
 
 
+def _maps_at(velocity_map, impulse_map, ts, ys):
+    return jax.vmap(lambda t, y: (velocity_map(t, y, None), impulse_map(t, y, None)))(ts, ys)
+
+
+# Compiled once per model structure (closed-over arrays are run-time values): the probes
+# below cost a program call, not a few hundred eager operations, on every drop-in call.
+_maps_at_jit = CachedJit(_maps_at)
+
+
 def _contact_rows(velocity_map, impulse_map, t0, y0, probes=3):
     """The rows a contact can touch: those its impulses move or its velocities read (a
     static mask). The sparsity of `J_u` and of `G_apply`'s impulse map, at `y0` and at
     random states around it (so that an entry zero by coincidence at `y0`, `sin 0`, does
     not hide a row); all rows if any evaluation fails."""
     rng = np.random.default_rng(0)
-    rows = np.zeros(y0.shape[0], bool)
-    for k in range(probes + 1):
-        y = y0 if k == 0 else y0 + rng.standard_normal(y0.shape) * (1 + np.abs(y0))
-        t = t0 if k == 0 else t0 + rng.standard_normal()
-        try:
-            W = np.asarray(velocity_map(t, jnp.asarray(y), None))
-            B = np.asarray(impulse_map(t, jnp.asarray(y), None))
-        except Exception:  # a map undefined away from y0: no restriction
-            return np.ones_like(rows)
-        if W.shape[-1] != rows.size or B.shape[0] != rows.size:
-            return np.ones_like(rows)
-        rows |= np.any(W != 0, axis=0) | np.any(B != 0, axis=1)
-    return rows
+    scale = 1 + np.abs(y0)
+    ys = np.concatenate([y0[None], y0 + rng.standard_normal((probes, y0.size)) * scale])
+    ts = np.concatenate([[t0], t0 + rng.standard_normal(probes)])
+    try:
+        W, B = (np.asarray(a) for a in _maps_at_jit(velocity_map, impulse_map, ts, ys))
+    except Exception:  # a map undefined away from y0: no restriction
+        return np.ones(y0.size, bool)
+    if W.shape[-1] != y0.size or B.shape[1] != y0.size:
+        return np.ones(y0.size, bool)
+    return np.any(W != 0, axis=(0, 1)) | np.any(B != 0, axis=(0, 2))
 
 
 def _solver(name, sopts):
