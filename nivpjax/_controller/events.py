@@ -42,7 +42,9 @@ def land_before_event(info: StepInfo, accept, ok, h_next, margin):
 
     No prediction (`inf`) leaves `h_next` unchanged; the result carries no gradient."""
     to_event = info.next_event - jnp.where(accept, info.h, 0.0)
-    land = jax.lax.stop_gradient(to_event * (1 - margin))
+    # In the step's dtype: a margin computed from a float64 rtol must not promote a
+    # float32 solve's step size.
+    land = jax.lax.stop_gradient((to_event * (1 - margin)).astype(to_event.dtype))
     coming = jnp.isfinite(to_event) & (to_event > EVENT_SKIP * h_next)
     # Retrying up to the event must shorten the attempt: an event in its last EVENT_SKIP
     # (an attempt that ends on the surface, up to the solver's tolerance on either side)
