@@ -104,20 +104,21 @@ def _projector(name, popts, n, component_slices, t0, y0, hosted):
 
         velocity_map = lambda t, y, a: jnp.atleast_2d(J_u(t, y))  # noqa: E731
         rows = _contact_rows(velocity_map, impulse_map, t0, y0)
-        gap_fn = lambda t, y, a: jnp.atleast_1d(gap(t, y)) - gap_tol  # noqa: E731
-        e = popts.get("e", 0.0)
+        common = dict(
+            gap=lambda t, y, a: jnp.atleast_1d(gap(t, y)) - gap_tol,
+            restitution=popts.get("e", 0.0),
+        )
         if rows.all():
-            return UnilateralContact(gap_fn, velocity_map, impulse_map, restitution=e)
+            return UnilateralContact(velocity_map=velocity_map, impulse_map=impulse_map, **common)
         # The contact acts on the rows its impulses move (a ball's velocity), as a scene's
         # does: the other rows (positions) are then free rows, interpolated at `t_eval`
         # with their rates instead of linearly.
         idx = np.flatnonzero(rows)
         cols = idx.tolist()  # a list in the closures: static indices, not a traced array
         contact = UnilateralContact(
-            gap_fn,
-            lambda t, y, a: velocity_map(t, y, a)[:, cols],
-            lambda t, y, a: impulse_map(t, y, a)[cols, :],
-            restitution=e,
+            velocity_map=lambda t, y, a: velocity_map(t, y, a)[:, cols],
+            impulse_map=lambda t, y, a: impulse_map(t, y, a)[cols, :],
+            **common,
         )
         return BlockProjector([(idx, contact)])
     # soccp
