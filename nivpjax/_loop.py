@@ -263,7 +263,7 @@ def attempt(
     y_eval = s.y_eval
     if y_eval is not None:
         final = accept & last
-        y_eval = _fill_eval(model, t_eval, s.t, s.y, t_new, y_new, accept, final, args, y_eval)
+        y_eval = _fill_eval(model, t_eval, s.t, s.y, t_new, y_new, final, args, y_eval)
     attempts = s.attempts
     if attempts is not None:
         err = jnp.sqrt(jnp.mean(jnp.where(error_mask, y_error, 0.0) ** 2))
@@ -294,15 +294,16 @@ def attempt(
     )
 
 
-def _fill_eval(model, t_eval, ta, ya, tb, yb, accept, final, args, y_eval):
+def _fill_eval(model, t_eval, ta, ya, tb, yb, final, args, y_eval):
     # The states at the output times inside the accepted step [ta, tb), and at tb too on
     # the last step: the step `interpolate` picks for each time from saved steps, so both
-    # give the same values (NaN stays where the run stopped before a time).
+    # give the same values (NaN stays where the run stopped before a time). A rejected
+    # attempt has tb = ta (and is not final): it writes nothing.
     span = jnp.where(tb > ta, tb - ta, 1.0)
     w = jnp.clip((t_eval - ta) / span, 0.0, 1.0)
     safe_tb = jnp.where(tb > ta, tb, ta + 1.0)
     at = jax.vmap(lambda t, w: _in_step(model, t, w, ta, ya, safe_tb, yb, args))
-    inside = accept & (t_eval >= ta) & ((t_eval < tb) | final)
+    inside = (t_eval >= ta) & ((t_eval < tb) | final)
     return jnp.where(inside[:, None], at(t_eval, w), y_eval)
 
 

@@ -110,3 +110,19 @@ def test_gradients_without_saved_steps_equal_the_full_save():
     eps = 1e-6
     fd = (loss(k + eps, nj.SaveAt(), t_eval) - loss(k - eps, nj.SaveAt(), t_eval)) / (2 * eps)
     np.testing.assert_allclose(full, fd, rtol=1e-4)
+
+
+def test_a_failed_run_leaves_nan_after_where_it_stopped():
+    # 20 fixed steps of 0.05 reach t = 1 of [0, 2]: the states at the times before come
+    # from the loop as from saved steps, the ones after are NaN (the result says why).
+    kw = dict(stepper=nj.Trapezoidal(), controller=nj.ConstantStepSize(), h0=0.05)
+    kw.update(max_steps=20, throw=False, t_eval=np.linspace(0.0, 2.0, 8))
+    y0, args = jnp.array([1.0, 0.0]), {"k": 2.0}
+    full = nj.solve(_oscillator, 0.0, 2.0, y0, args, **kw)
+    loop = nj.solve(_oscillator, 0.0, 2.0, y0, args, saveat=nj.SaveAt(), **kw)
+    assert loop.result == nj.RESULTS.time_max_steps_reached
+    np.testing.assert_allclose(float(loop.t_final), 1.0, rtol=1e-12)
+    before = np.asarray(loop.t_eval) < 1.0
+    assert before.sum() == 4 and np.isfinite(loop.y_eval[before]).all()
+    assert np.isnan(loop.y_eval[~before]).all() and np.isnan(full.y_eval[~before]).all()
+    np.testing.assert_allclose(loop.y_eval[before], full.y_eval[before], rtol=0, atol=1e-13)
