@@ -54,7 +54,7 @@ def test_bad_batch_sizes_raise():
 
 _SCRIPT = textwrap.dedent(
     """
-    import sys
+    import re, sys
     import jax, numpy as np
     mode, path = sys.argv[1], sys.argv[2]
     if mode == "distributed":  # two processes of two devices each, on this host
@@ -64,6 +64,10 @@ _SCRIPT = textwrap.dedent(
         )
     jax.config.update("jax_enable_x64", True)
     import nivpjax as nj
+    from nivpjax import _batched
+    calls = []  # the compiled batch programs' calls, to read their HLO
+    _run = _batched._batched_jit._run
+    _batched._batched_jit._run = lambda call: calls.append(call) or _run(call)
     def decay(t, y, args):
         return -args["k"] * y
     ks = np.linspace(0.5, 4.0, 10)
@@ -80,6 +84,11 @@ _SCRIPT = textwrap.dedent(
                            max_steps=128)
             assert int(sol.n_accepted[i]) == int(one.n_accepted), i
             np.testing.assert_allclose(sol.y_final[i], one.y_final, rtol=1e-13)
+        # Each device runs its own loop: no collective in the program (one loop for the
+        # whole batch needs an all-reduce per iteration for its stopping test).
+        program = _batched._batched_jit._program(calls[0].key, False)
+        hlo = program.lower(calls[0].dynamic).compile().as_text()
+        assert not re.search("all-reduce|all-gather|collective-permute|all-to-all", hlo)
     leaves = jax.tree_util.tree_flatten_with_path(sol)[0]
     out = {jax.tree_util.keystr(k): np.asarray(x) for k, x in leaves}
     out["devices"] = np.array([len(jax.devices()), jax.process_count()])
