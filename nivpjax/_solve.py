@@ -89,7 +89,7 @@ def solve(
       state, `SaveAt(ts=...)` (or `SaveAt()` with `t_eval`) the final state and the states
       at those times: the per-step buffers are then not allocated, which is what a
       `jax.vmap` sweep wants. Times are given once, as `t_eval` or as `saveat.ts`.
-    - `max_steps`: bound on attempted steps; buffers have `max_steps + 1` rows.
+    - `max_steps`: bound on attempted steps; saved steps' buffers have `max_steps + 1` rows.
     - `error_estimate`: `"auto"` uses the stepper's embedded estimate when it has one and
       Richardson step doubling otherwise; `"richardson"` forces step doubling.
     - `tau`, `equation_rows`: scaling of algebraic rows (see [`nivpjax.Model`][]); `tau` is
