@@ -4,7 +4,11 @@ effects) and, as the peer, diffrax `Kvaerno5` on a penalty-regularised ball (wit
 default options, as its users get it, and with nivpjax's `nj.compiler_options()`). Then a
 tolerance sweep (three tolerances: one compilation) and a closure rebuilt per call.
 
-Run:  python -m benchmarks.compile_time [--repeats N]
+Run:  python -m benchmarks.compile_time [--repeats N] [--gradient-only]
+
+The first reverse-mode gradient of the default ball solve (a top-level `jax.grad`, from
+cleared caches) is compared with its first forward call (issue 24's target: at most 2.5x),
+with the stages of `jax.jit(jax.grad(...))`.
 
 Each case starts from cleared caches (`jax.clear_caches()` and nivpjax's own). Times are
 wall seconds on this machine; with other jobs on the cores, compare the ratios.
@@ -161,10 +165,61 @@ def sweep_and_closures():
     return first, sweep, sweep_traces, closures, closure_traces
 
 
+def _ball_loss(**kw):
+    scene, x0, args = nj.scenes.bouncing_ball()
+
+    def loss(e):
+        return scene.solve(0.0, 1.5, x0, {**args, "e": e}, max_steps=4096, **kw).y_final[0]
+
+    return loss
+
+
+def first_gradient():
+    """The first call of the default ball solve, its first reverse-mode gradient (a
+    top-level `jax.grad`, as a calibration script calls it), each from cleared caches, and
+    the stages of `jax.jit(jax.grad(...))`: trace, lower and XLA compile."""
+    e = jnp.asarray(0.8)
+    _fresh()
+    loss = _ball_loss()
+    t = time.perf_counter()
+    jax.block_until_ready(loss(e))
+    forward = time.perf_counter() - t
+    _fresh()
+    loss = _ball_loss()
+    t = time.perf_counter()
+    jax.block_until_ready(jax.grad(loss)(e))
+    gradient = time.perf_counter() - t
+    _fresh()
+    stages = _stages(jax.jit(jax.grad(_ball_loss())), (e,))
+    # The faster recipe: nivpjax's compiler options on the user's jit (JAX takes them on
+    # top-level jits only, so a top-level `jax.grad` cannot get them) and every step
+    # checkpointed (no checkpoint schedule in the program).
+    _fresh()
+    recipe = jax.jit(jax.grad(_ball_loss(checkpoints=4096)), compiler_options=nj.compiler_options())
+    t = time.perf_counter()
+    jax.block_until_ready(recipe(e))
+    return forward, gradient, stages, time.perf_counter() - t
+
+
+def _print_gradient():
+    forward, gradient, (tr, lo, co), recipe = first_gradient()
+    print(
+        f"ball, first forward call {forward:.2f} s; first jax.grad {gradient:.2f} s "
+        f"({gradient / forward:.1f}x; target 2.5x); jax.jit(jax.grad): trace {tr:.2f} s, "
+        f"lower {lo:.2f} s, XLA {co:.2f} s; jax.jit(jax.grad, compiler_options="
+        f"nj.compiler_options()) with checkpoints=max_steps: {recipe:.2f} s "
+        f"({recipe / forward:.1f}x)"
+    )
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=1)
+    parser.add_argument("--gradient-only", action="store_true")
     opts = parser.parse_args(argv)
+    if opts.gradient_only:
+        _print_gradient()
+        return
     rows = measure(opts.repeats)
     peer = sum(next(row for row in rows if row[0] == PEER)[1:])
     print("| case | trace s | lower s | XLA compile s | total s | / Kvaerno5 |")
@@ -172,6 +227,8 @@ def main(argv=None):
     for name, tr, lo, co in rows:
         total = tr + lo + co
         print(f"| {name} | {tr:.2f} | {lo:.2f} | {co:.2f} | {total:.2f} | {total / peer:.1f}x |")
+    print()
+    _print_gradient()
     first, sweep, st, closures, ct = sweep_and_closures()
     print(
         f"\nball, first call {first:.2f} s; three more tolerances {sweep:.2f} s in all "

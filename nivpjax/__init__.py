@@ -45,6 +45,7 @@ from ._projector import (
     project_soc as project_soc,
 )
 from ._results import RESULTS as RESULTS
+from ._saveat import SaveAt as SaveAt
 from ._scene import (
     AbstractEffect as AbstractEffect,
     Contact as Contact,

@@ -1,14 +1,17 @@
 """`solve_batched`: many members of one model, vmapped, ordered, chunked and sharded across
-devices. Built on [`nivpjax.solve`][]; the loop itself knows nothing of batches."""
+devices (and processes). Built on [`nivpjax.solve`][]; the loop itself knows nothing of
+batches."""
 
 from typing import Any
 
 import jax
 import numpy as np
+from jax.experimental import multihost_utils
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from ._cache import CachedJit
 from ._results import RESULTS
+from ._saveat import SaveAt
 from ._solution import Solution
 from ._solve import _IN_GRAPH_CHECKS, SolveError, solve
 from ._validate import check_times
@@ -34,21 +37,38 @@ _CONCRETE = ("mass_matrix", "equation_rows")
 
 
 def _batched_impl(vector_field, t0, t1, y0, args, args_axes, kwargs, mesh):
-    # `mesh` is static: one program per device set, its outputs sharded like its inputs.
+    # `mesh` is static: one program per device set. With a mesh, each device runs the
+    # vmapped loop of its own share of the batch (`shard_map`): it stops when its slowest
+    # member is done, and no iteration waits for the other devices.
     kwargs = {k: (v.array if isinstance(v, _Frozen) else v) for k, v in kwargs.items()}
 
     def one(y, a):
         return solve(vector_field, t0, t1, y, a, throw=False, **kwargs)
 
+    def share(y, a):
+        return jax.vmap(one, in_axes=(0, args_axes))(y, a)
+
+    if mesh is not None:
+        share = jax.shard_map(
+            share,
+            mesh=mesh,
+            in_specs=(PartitionSpec("batch"), _specs(args_axes)),
+            out_specs=PartitionSpec("batch"),
+            check_vma=False,
+        )
     token = _IN_GRAPH_CHECKS.set(False)
     try:
-        sol = jax.vmap(one, in_axes=(0, args_axes))(y0, args)
+        return share(y0, args)
     finally:
         _IN_GRAPH_CHECKS.reset(token)
-    if mesh is None:
-        return sol
-    batch = NamedSharding(mesh, PartitionSpec("batch"))
-    return jax.tree.map(lambda x: jax.lax.with_sharding_constraint(x, batch), sol)
+
+
+def _spec(ax):
+    return PartitionSpec() if ax is None else PartitionSpec(*([None] * ax + ["batch"]))
+
+
+def _specs(axes):
+    return jax.tree.map(_spec, axes, is_leaf=_none)
 
 
 _batched_jit = CachedJit(_batched_impl)
@@ -109,16 +129,26 @@ def _mesh(devices):
 
 
 def _shard(tree, axes, mesh):
+    """`tree` as global arrays over `mesh`, batched leaves split along their batch axis.
+    Each process builds only the shards of its own devices (from the full host array every
+    process holds), so the same call works in one process and across several."""
     if mesh is None:
         return tree
 
     def put(ax, a):
-        if ax is None:
-            return a
-        spec = PartitionSpec(*([None] * ax + ["batch"]))
-        return jax.device_put(a, NamedSharding(mesh, spec))
+        a = np.asarray(a)
+        sharding = NamedSharding(mesh, _spec(ax))
+        return jax.make_array_from_callback(a.shape, sharding, lambda index: a[index])
 
     return jax.tree.map(put, axes, tree, is_leaf=_none)
+
+
+def _to_host(sol):
+    """The whole result on the host of every process (an all-gather across processes when
+    the result lives on devices of several)."""
+    if jax.process_count() == 1:
+        return jax.tree.map(np.asarray, sol)
+    return multihost_utils.process_allgather(sol, tiled=True)
 
 
 def solve_batched(
@@ -132,6 +162,7 @@ def solve_batched(
     cost=None,
     chunk_size: int | None = None,
     devices=None,
+    saveat: SaveAt | None = None,
     throw: bool = False,
     **kwargs,
 ) -> Solution:
@@ -141,9 +172,15 @@ def solve_batched(
     every unfinished member, so a batch costs as much as its slowest member times its size.
     Two levers cut that waste: `cost` orders the members so that those needing similar step
     counts run together, and `chunk_size` runs the ordered batch in chunks of that many
-    members, one after another, through one compiled program. Each chunk is sharded along
-    the batch axis over `devices` (default: every device JAX sees) with a 1-D
-    `jax.sharding.Mesh` named `"batch"`; results are identical to an unsharded run.
+    members, one after another, through one compiled program. Each chunk is split along
+    the batch axis over `devices` (default: every device JAX sees, across all processes
+    after `jax.distributed.initialize()`) with a 1-D `jax.sharding.Mesh` named `"batch"`,
+    and each device runs the loop of its own share (`jax.shard_map`): a device stops when
+    its own slowest member is done. Results are identical to an unsharded run.
+
+    By default only the final state and the counters are kept (`saveat=SaveAt()`): a
+    sweep's members then carry no buffers of `max_steps` rows. Pass `t_eval` for states
+    at output times, or `saveat=nj.SaveAt(steps=True)` for every step.
 
     **Arguments:**
 
@@ -159,17 +196,22 @@ def solve_batched(
       sweep.
     - `chunk_size`: members per chunk (rounded up to a multiple of the number of devices;
       default: the whole batch at once). The last chunk is padded by repeating a member.
-    - `devices`: the devices to shard over (default `jax.devices()`).
+    - `devices`: the devices to shard over (default `jax.devices()`: with several
+      processes, the devices of all of them; every process makes the same call with the
+      same arguments and builds only its own devices' shards).
+    - `saveat`: a [`nivpjax.SaveAt`][]; default `SaveAt()` (final state only, plus the
+      states at `t_eval` if given).
     - `throw`: raise [`nivpjax.SolveError`][] if any member failed. Default `False`: the
       result code of each member is in `Solution.result`.
     - `kwargs`: any other keyword argument of [`nivpjax.solve`][] (`projector`, `stepper`,
       `controller`, `mass_matrix`, `t_eval`, `max_steps`, ...), shared by all members.
 
     **Returns:** a [`nivpjax.Solution`][] whose every field has a leading batch axis, in the
-    members' original order.
+    members' original order (on the host of every process when the run spans several).
     """
     if "progress" in kwargs:
         raise ValueError("`progress` is not supported by solve_batched.")
+    kwargs["saveat"] = SaveAt() if saveat is None else saveat
     y0 = np.asarray(y0)
     args_axes = _full_axes(args_axes, args)
     if y0.ndim not in (1, 2):
@@ -203,9 +245,11 @@ def solve_batched(
         y_c = _shard(np.take(y0, idx, axis=0), 0, mesh)
         a_c = _shard(_take(args, idx, args_axes), args_axes, mesh)
         parts.append(_batched_jit(vector_field, t0, t1, y_c, a_c, args_axes, kwargs, mesh))
-    if len(parts) == 1 and chunk == size and np.array_equal(order, np.arange(size)):
+    in_place = len(parts) == 1 and chunk == size and np.array_equal(order, np.arange(size))
+    if in_place and jax.process_count() == 1:
         sol = parts[0]  # kept on the devices, sharded
     else:  # gathered on the host, in the original order
+        parts = [_to_host(p) for p in parts]
         inverse = np.empty(size, np.int64)
         inverse[order] = np.arange(size)
         sol = jax.tree.map(lambda *xs: np.concatenate(xs)[:size][inverse], *parts)

@@ -28,22 +28,28 @@ class _LoopState(eqx.Module):
     n_attempts: jax.Array
     n_iterations: jax.Array
     result: RESULTS
-    # Buffers (write-only inside the loop), one row per accepted step.
-    ts: jax.Array
-    ys: jax.Array
-    hs: jax.Array
-    multipliers: jax.Array
-    iterations: jax.Array
-    residual_norms: jax.Array
-    nonlinear_success: jax.Array
+    # Buffers (write-only inside the loop), one row per accepted step; None when the
+    # steps are not saved (`SaveAt(steps=False)`), and then never allocated.
+    ts: jax.Array | None
+    ys: jax.Array | None
+    hs: jax.Array | None
+    multipliers: jax.Array | None
+    iterations: jax.Array | None
+    residual_norms: jax.Array | None
+    nonlinear_success: jax.Array | None
     # Buffers, one row per attempt (or None).
     attempts: AttemptLog | None
+    # The states at the output times, filled in the loop when the steps are not saved
+    # (NaN until the step containing a time is accepted), or None.
+    y_eval: jax.Array | None = None
 
 
 def _buffers(state: _LoopState):
     # Only the differentiable float arrays. Per-step counts and flags stay ordinary loop
     # state: as checkpointed-loop buffers they break its perturbation analysis under
     # reverse mode ("`where` must not depend on the leaves").
+    # Without saved steps there are none: `run` passes no `buffers` then (equinox calls
+    # this on trees whose `None`s are leaves, so it cannot filter them here).
     return [state.ts, state.ys, state.hs, state.multipliers, state.residual_norms]
 
 
@@ -102,11 +108,13 @@ def init_state(
     error_mask,
     max_steps: int,
     save_attempts: bool,
+    save_steps: bool = True,
+    t_eval=None,
 ) -> _LoopState:
     """The loop state before the first attempt: the controller's first step and state,
-    consistent algebraic components, empty buffers (`max_steps + 1` rows)."""
+    consistent algebraic components, empty buffers (`max_steps + 1` rows; none without
+    `save_steps`, and then NaN states at `t_eval` to be filled in the loop)."""
     dtype = y0.dtype
-    n = y0.shape[0]
     error_order = _error_order(stepper, controller)
     h_min = controller.bounds[0]
     h_min = default_h_min(t0, t1, dtype) if h_min is None else jnp.asarray(h_min, dtype)
@@ -134,7 +142,6 @@ def init_state(
         result0 = RESULTS.where(ok, result0, RESULTS.nonlinear_failure)
         h, controller_state = first_step(y0)
 
-    rows = max_steps + 1
     return _LoopState(
         t=t0,
         h=h,
@@ -147,6 +154,27 @@ def init_state(
         n_attempts=jnp.array(0, jnp.int32),
         n_iterations=jnp.array(0, jnp.int32),
         result=result0,
+        **(_step_buffers(max_steps + 1, t0, h, y0) if save_steps else _NO_STEPS),
+        attempts=_init_attempts(max_steps, dtype) if save_attempts else None,
+        y_eval=None if save_steps or t_eval is None else _empty_eval(t_eval, y0),
+    )
+
+
+_STEP_FIELDS = (
+    "ts",
+    "ys",
+    "hs",
+    "multipliers",
+    "iterations",
+    "residual_norms",
+    "nonlinear_success",
+)
+_NO_STEPS = dict.fromkeys(_STEP_FIELDS)
+
+
+def _step_buffers(rows, t0, h, y0):
+    dtype, n = y0.dtype, y0.shape[0]
+    return dict(
         ts=jnp.full((rows,), jnp.inf, dtype).at[0].set(t0),
         ys=jnp.zeros((rows, n), dtype).at[0].set(y0),
         hs=jnp.zeros((rows,), dtype).at[0].set(h),
@@ -156,8 +184,11 @@ def init_state(
         iterations=jnp.zeros((rows,), jnp.int32),
         residual_norms=jnp.zeros((rows,), dtype).at[0].set(-0.0),
         nonlinear_success=jnp.ones((rows,), bool),
-        attempts=_init_attempts(max_steps, dtype) if save_attempts else None,
     )
+
+
+def _empty_eval(t_eval, y0):
+    return jnp.full((t_eval.shape[0], y0.shape[0]), jnp.nan, y0.dtype)
 
 
 def _error_order(stepper, controller):
@@ -173,10 +204,12 @@ def attempt(
     args,
     error_mask,
     progress=None,
+    t_eval=None,
 ) -> _LoopState:
     """One attempted step of size `s.h` (stretched onto `t1` when close): the step, the
-    controller's decision, the counters and (on acceptance) the buffers. Also usable outside
-    the loop for manual stepping."""
+    controller's decision, the counters and (on acceptance) the buffers, or the states at
+    the `t_eval` inside the step when the steps are not saved. Also usable outside the loop
+    for manual stepping."""
     h_min = s.h_min
     h_max = controller.bounds[1]
     remaining = t1 - s.t
@@ -226,8 +259,12 @@ def attempt(
     idx = s.n_accepted + 1
 
     def put(buf, x):
-        return eqxi.buffer_at_set(buf, idx, x, pred=accept)
+        return None if buf is None else eqxi.buffer_at_set(buf, idx, x, pred=accept)
 
+    y_eval = s.y_eval
+    if y_eval is not None:
+        final = accept & last
+        y_eval = _fill_eval(model, t_eval, s.t, s.y, t_new, y_new, final, args, y_eval)
     attempts = s.attempts
     if attempts is not None:
         err = jnp.sqrt(jnp.mean(jnp.where(error_mask, y_error, 0.0) ** 2))
@@ -254,32 +291,34 @@ def attempt(
         residual_norms=put(s.residual_norms, out.stats.residual_norm),
         nonlinear_success=put(s.nonlinear_success, nonlinear_ok),
         attempts=attempts,
+        y_eval=y_eval,
     )
+
+
+def _fill_eval(model, t_eval, ta, ya, tb, yb, final, args, y_eval):
+    # The states at the output times inside the accepted step [ta, tb), and at tb too on
+    # the last step: the step `interpolate` picks for each time from saved steps, so both
+    # give the same values (NaN stays where the run stopped before a time). A rejected
+    # attempt has tb = ta (and is not final): it writes nothing.
+    span = jnp.where(tb > ta, tb - ta, 1.0)
+    w = jnp.clip((t_eval - ta) / span, 0.0, 1.0)
+    safe_tb = jnp.where(tb > ta, tb, ta + 1.0)
+    at = jax.vmap(lambda t, w: _in_step(model, t, w, ta, ya, safe_tb, yb, args))
+    inside = (t_eval >= ta) & ((t_eval < tb) | final)
+    return jnp.where(inside[:, None], at(t_eval, w), y_eval)
 
 
 def finish(final: _LoopState, t1) -> Solution:
     """The [`nivpjax.Solution`][] of a loop state (after the loop, or after manual steps)."""
-    rows = final.ts.shape[0]
     result = RESULTS.where(
         (final.result == RESULTS.successful) & (final.t < t1),
         RESULTS.time_max_steps_reached,
         final.result,
     )
-    # Padding rows repeat the last accepted state so that reductions and plots stay finite.
-    # The other buffers hold their padding already (inf times; zero steps, counts and
-    # residuals; success) in every row that no accepted step wrote.
     k = final.n_accepted
-    pad = jnp.arange(rows) > k
-    ys = jnp.where(pad[:, None], final.ys[k], final.ys)
-    multipliers = jnp.where(pad[:, None], final.multipliers[k], final.multipliers)
+    steps = _NO_STEPS if final.ts is None else _padded_steps(final, k)
     return Solution(
-        ts=final.ts,
-        ys=ys,
-        hs=final.hs,
-        multipliers=multipliers,
-        iterations=final.iterations,
-        residual_norms=final.residual_norms,
-        nonlinear_success=final.nonlinear_success,
+        **steps,
         t_final=final.t,
         h_last=final.h_last,
         y_final=final.y,
@@ -287,7 +326,24 @@ def finish(final: _LoopState, t1) -> Solution:
         n_rejected=final.n_rejected,
         n_iterations=final.n_iterations,
         result=result,
+        y_eval=final.y_eval,
         attempts=_finish_attempts(final.attempts),
+    )
+
+
+def _padded_steps(final: _LoopState, k):
+    # Padding rows repeat the last accepted state so that reductions and plots stay finite.
+    # The other buffers hold their padding already (inf times; zero steps, counts and
+    # residuals; success) in every row that no accepted step wrote.
+    pad = jnp.arange(final.ts.shape[0]) > k
+    return dict(
+        ts=final.ts,
+        ys=jnp.where(pad[:, None], final.ys[k], final.ys),
+        hs=final.hs,
+        multipliers=jnp.where(pad[:, None], final.multipliers[k], final.multipliers),
+        iterations=final.iterations,
+        residual_norms=final.residual_norms,
+        nonlinear_success=final.nonlinear_success,
     )
 
 
@@ -306,23 +362,39 @@ def run(
     kind: str,
     progress,
     checkpoints: int | None = None,
+    save_steps: bool = True,
+    t_eval=None,
 ) -> Solution:
+    """The compiled loop. With `save_steps` the states at `t_eval` are left to
+    `interpolate` (from the saved steps); without it they are filled in the loop."""
     state = init_state(
-        model, stepper, controller, t0, t1, y0, args, h0, error_mask, max_steps, save_attempts
+        model,
+        stepper,
+        controller,
+        t0,
+        t1,
+        y0,
+        args,
+        h0,
+        error_mask,
+        max_steps,
+        save_attempts,
+        save_steps,
+        t_eval,
     )
 
     def cond(s: _LoopState):
         return (s.t < t1) & (s.result == RESULTS.successful) & (s.n_attempts < max_steps)
 
     def body(s: _LoopState):
-        return attempt(s, model, stepper, controller, t1, args, error_mask, progress)
+        return attempt(s, model, stepper, controller, t1, args, error_mask, progress, t_eval)
 
     final = eqxi.while_loop(
         cond,
         body,
         state,
         max_steps=max_steps,
-        buffers=_buffers,
+        buffers=_buffers if save_steps else None,
         kind=kind,
         checkpoints=checkpoints if kind == "checkpointed" else None,
     )
@@ -441,11 +513,15 @@ def interpolate_multipliers(sol: Solution, t_eval, y_eval, model: Model, args=No
     $-f$ at the interpolated time). Contacts: zero in flight, the resting force where a
     contact holds the body; an impact is an impulse, which no force at an instant
     describes (the `multipliers` buffer's row of that step holds impulse / h)."""
-    k = sol.n_accepted
-    idx = jnp.searchsorted(sol.ts, t_eval, side="right") - 1
-    idx = jnp.clip(idx, 0, jnp.maximum(k - 1, 0))
-    span = sol.ts[jnp.minimum(idx + 1, k)] - sol.ts[idx]
-    h = jnp.where(span > 0, span, 1.0)
+    if sol.ts is None:
+        # Steps not saved: the last step's size (it only sets the JVP's point).
+        h = jnp.broadcast_to(sol.h_last, t_eval.shape)
+    else:
+        k = sol.n_accepted
+        idx = jnp.searchsorted(sol.ts, t_eval, side="right") - 1
+        idx = jnp.clip(idx, 0, jnp.maximum(k - 1, 0))
+        span = sol.ts[jnp.minimum(idx + 1, k)] - sol.ts[idx]
+        h = jnp.where(span > 0, span, 1.0)
     safe_y = jnp.where(jnp.isfinite(y_eval), y_eval, 0.0)
     out = jax.vmap(lambda t, h, y: model.reaction_at(t, h, y, args))(t_eval, h, safe_y)
     return jnp.where(jnp.isnan(y_eval), jnp.nan, out)

@@ -46,8 +46,10 @@ class AttemptLog(eqx.Module):
 class Solution(eqx.Module):
     """The result of [`nivpjax.solve`][].
 
-    Buffers have `max_steps + 1` rows; the first `n_accepted + 1` are the initial point and
-    the accepted steps, the rest are padding (`t = inf`; states and multipliers repeat the
+    Buffers have `max_steps + 1` rows (or are `None`: steps not saved,
+    [`nivpjax.SaveAt`][]`(steps=False)`, the default of [`nivpjax.solve_batched`][]); the
+    first `n_accepted + 1` are the initial point and the accepted steps, the rest are
+    padding (`t = inf`; states and multipliers repeat the
     last accepted value so that plots and reductions stay finite; step sizes, iterations
     and residual norms are 0, `nonlinear_success` True). Use
     [`nivpjax.Solution.trimmed`][] on concrete results to drop the padding.
@@ -79,13 +81,13 @@ class Solution(eqx.Module):
     - `attempts`: an [`nivpjax.AttemptLog`][] or `None`.
     """
 
-    ts: Float[Array, " N"]
-    ys: Float[Array, "N n"]
-    hs: Float[Array, " N"]
-    multipliers: Float[Array, "N n"]
-    iterations: Int[Array, " N"]
-    residual_norms: Float[Array, " N"]
-    nonlinear_success: Bool[Array, " N"]
+    ts: Float[Array, " N"] | None
+    ys: Float[Array, "N n"] | None
+    hs: Float[Array, " N"] | None
+    multipliers: Float[Array, "N n"] | None
+    iterations: Int[Array, " N"] | None
+    residual_norms: Float[Array, " N"] | None
+    nonlinear_success: Bool[Array, " N"] | None
     t_final: Float[Array, ""]
     h_last: Float[Array, ""]
     y_final: Float[Array, " n"]
@@ -101,7 +103,7 @@ class Solution(eqx.Module):
     def trimmed(self) -> "Solution":
         """A copy with buffers cut to the accepted steps (needs concrete, unbatched values)."""
         k = int(self.n_accepted) + 1
-        cut = lambda x: x[:k]
+        cut = lambda x: None if x is None else x[:k]
         attempts = self.attempts
         return Solution(
             ts=cut(self.ts),

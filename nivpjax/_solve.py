@@ -16,6 +16,7 @@ from ._model import Model
 from ._progress_meter import progress_callback
 from ._projector import AbstractProjector
 from ._results import RESULTS
+from ._saveat import SaveAt, resolve as resolve_saveat
 from ._solution import Solution
 from ._stepper import AbstractStepper
 
@@ -45,6 +46,7 @@ def solve(
     controller: AbstractController | None = None,
     h0=None,
     t_eval=None,
+    saveat: SaveAt | None = None,
     max_steps: int = 4096,
     error_estimate: Literal["auto", "embedded", "richardson"] = "auto",
     tau=1.0,
@@ -83,7 +85,12 @@ def solve(
       projected back into its set; selections (a relay's $w$) by the phase they are in,
       other algebraic rows linear (see `nivpjax._loop.interpolate` and the error-control
       page). The constraint reactions there go into `Solution.multipliers_eval`.
-    - `max_steps`: bound on attempted steps; buffers have `max_steps + 1` rows.
+    - `saveat`: what to keep, a [`nivpjax.SaveAt`][]; default `SaveAt(steps=True)`: every
+      accepted step (and the states at `t_eval` if given). `SaveAt()` keeps only the final
+      state, `SaveAt(ts=...)` (or `SaveAt()` with `t_eval`) the final state and the states
+      at those times: the per-step buffers are then not allocated, which is what a
+      `jax.vmap` sweep wants. Times are given once, as `t_eval` or as `saveat.ts`.
+    - `max_steps`: bound on attempted steps; saved steps' buffers have `max_steps + 1` rows.
     - `error_estimate`: `"auto"` uses the stepper's embedded estimate when it has one and
       Richardson step doubling otherwise; `"richardson"` forces step doubling.
     - `tau`, `equation_rows`: scaling of algebraic rows (see [`nivpjax.Model`][]); `tau` is
@@ -130,6 +137,7 @@ def solve(
     t0 = v.as_array(t0, dtype)
     t1 = v.as_array(t1, dtype)
     error_mask = v.check_error_mask(controller, algebraic, n)
+    save_steps, t_eval = resolve_saveat(saveat, t_eval)
     t_eval = v.check_t_eval(t_eval, dtype, t0_c, t1_c)
     model = Model.build(
         vector_field,
@@ -153,6 +161,7 @@ def solve(
         t_eval,
         max_steps,
         save_attempts,
+        save_steps,
         v.ADJOINTS[adjoint],
         checkpoints,
         progress,
@@ -180,6 +189,7 @@ def _solve_impl(
     t_eval,
     max_steps,
     save_attempts,
+    save_steps,
     kind,
     checkpoints,
     progress,
@@ -205,13 +215,17 @@ def _solve_impl(
         kind,
         meter,
         checkpoints,
+        save_steps,
+        t_eval,
     )
     if t_eval is not None:
-        y_eval = interpolate(sol, t_eval, model, args)
+        # Without saved steps the loop filled `y_eval` itself.
+        y_eval = interpolate(sol, t_eval, model, args) if save_steps else sol.y_eval
+        multipliers_eval = interpolate_multipliers(sol, t_eval, y_eval, model, args)
         sol = eqx.tree_at(
             lambda s: (s.t_eval, s.y_eval, s.multipliers_eval),
             sol,
-            (t_eval, y_eval, interpolate_multipliers(sol, t_eval, y_eval, model, args)),
+            (t_eval, y_eval, multipliers_eval),
             is_leaf=lambda x: x is None,
         )
     if throw_inside:

@@ -116,9 +116,11 @@ def super_twisting(k1=None, k2=None, c=1.0, lipschitz=1.5, x0=(0.5, 0.0)):
     r"""The super-twisting sliding-mode controller on a double integrator with a bounded
     disturbance $d(t) = 0.3\sin 5t$:
 
-    $$ x_1' = x_2, \quad x_2' = u + d(t), \quad \sigma = x_2 + c x_1,
-       \quad u = -k_1 \sqrt{|\sigma|}\,w + \nu, \quad \nu' = -k_2 w,
-       \quad w \in \operatorname{sign}(\sigma). $$
+    $$ \begin{gathered}
+       x_1' = x_2, \quad x_2' = u + d(t), \quad \sigma = x_2 + c x_1, \\
+       u = -k_1 \sqrt{|\sigma|}\,w + \nu, \quad \nu' = -k_2 w,
+       \quad w \in \operatorname{sign}(\sigma).
+       \end{gathered} $$
 
     With $k_1 = 1.5\sqrt{L}$, $k_2 = 1.1 L$ ($L$ bounding $|\dot d|$) $\sigma$ reaches 0 in
     finite time and stays there without chattering; then $x_1$ decays like $e^{-ct}$.
@@ -183,8 +185,10 @@ def diode_bridge(amplitude=1.0, omega=2 * np.pi * 50, R_s=1.0, R_L=1000.0, C=1e-
 def chua(alpha=15.6, beta=28.0, m0=-1.143, m1=-0.714, x0=(0.7, 0.0, 0.0)):
     r"""Chua's circuit (dimensionless) with its piecewise-linear diode:
 
-    $$ x' = \alpha(y - x - g(x)),\ y' = x - y + z,\ z' = -\beta y,\quad
-       g(x) = m_0 x + (m_1 - m_0)\,\operatorname{sat}(x), $$
+    $$ \begin{gathered}
+       x' = \alpha(y - x - g(x)),\ y' = x - y + z,\ z' = -\beta y, \\
+       g(x) = m_0 x + (m_1 - m_0)\,\operatorname{sat}(x),
+       \end{gathered} $$
 
     $\operatorname{sat}(x) = \operatorname{clip}(x, -1, 1)$ as a saturation effect
     (multiplier `"sat"`). The double-scroll attractor."""

@@ -53,6 +53,9 @@ SKIPPED = {
     # `learn.train` (compiles one large vmapped program: minutes) and a gymnasium episode
     # (compiles the environment's reset, step and reference solve).
     "tutorials/learned-step-size.md": 2,
+    # `jax.distributed.initialize` for a sweep across machines (two processes; the
+    # localhost run is tests/test_batched.py::test_two_processes_equal_one).
+    "tutorials/batched-sweeps.md": 1,
 }
 
 

@@ -328,3 +328,20 @@ def eqx_replace(sol, **fields):
 
     names = list(fields)
     return eqx.tree_at(lambda s: [getattr(s, n) for n in names], sol, [fields[n] for n in names])
+
+
+def test_multipliers_at_teval_without_saved_steps():
+    # `SaveAt(ts=...)` fills the states at the output times inside the loop; the
+    # multipliers there are the same reactions (only the JVP's point, set by a step size,
+    # differs: the last step's instead of each output's own).
+    scene, x0, args = nj.scenes.spring_slider()
+    t_eval = jnp.linspace(0.0, 1.0, 101)
+    kwargs = dict(stepper=nj.Bathe(), controller=nj.PIDController(rtol=1e-4, atol=1e-6))
+    saved = scene.solve(0.0, 1.0, x0, args, t_eval=t_eval, **kwargs)
+    unsaved = scene.solve(0.0, 1.0, x0, args, saveat=nj.SaveAt(ts=t_eval), **kwargs)
+    assert unsaved.ts is None
+    # (The loop's program rounds differently: states agree to 1e-19 here.)
+    np.testing.assert_allclose(np.asarray(unsaved.y_eval), np.asarray(saved.y_eval), atol=1e-15)
+    np.testing.assert_allclose(
+        np.asarray(unsaved.multipliers_eval), np.asarray(saved.multipliers_eval), atol=1e-12
+    )

@@ -5,7 +5,10 @@
    No navigation, table-of-contents or page title shows raw TeX (a heading with maths).
 2. Served on 127.0.0.1 and opened in headless Debian Chromium with every host other than
    127.0.0.1 unresolvable, the maths renders: after the page's JavaScript ran, every
-   `arithmatex` element holds rendered KaTeX and none holds a KaTeX error.
+   `arithmatex` element holds rendered KaTeX and none holds a KaTeX error. In a window
+   1280 px wide, no displayed equation is wider than its box (which would clip it, or
+   hide its end behind a scroll bar): a script the check's server adds to each page
+   measures every one once KaTeX has rendered them.
 3. The API pages document every public name of `nivpjax` and the public functions and
    classes of its public submodules and subpackages (`scenes`, `compat`, `learn`,
    `learn.tasks`, `learn.pretrained`, `rl`).
@@ -18,10 +21,12 @@ Exits 1 and lists the problems if any check fails.
 
 import argparse
 import functools
+import html
 import html.parser
 import http.server
 import importlib
 import inspect
+import json
 import os
 import pathlib
 import posixpath
@@ -225,9 +230,56 @@ def check_api(site):
     return [f"API reference lacks {name}" for name in missing]
 
 
+# Added by the check's server before `</body>` of each page: once KaTeX has rendered every
+# formula, it lists the displayed equations wider than their box (`scrollWidth` beyond
+# `clientWidth`: clipped, or scrolled at this width) in a body attribute `--dump-dom` shows.
+MEASURE_MATHS = """<script>
+(function () {
+  function measure() {
+    var maths = document.querySelectorAll(".arithmatex");
+    for (var i = 0; i < maths.length; i++) {
+      if (!maths[i].dataset.rendered) return setTimeout(measure, 50);
+    }
+    var clipped = [];
+    document.querySelectorAll("div.arithmatex").forEach(function (el) {
+      var over = el.scrollWidth - el.clientWidth;
+      if (over > 1) {
+        var tex = el.querySelector("annotation");
+        var text = (tex ? tex.textContent : el.textContent).replace(/\\s+/g, " ").trim();
+        clipped.push(over + " px too wide: " + text.slice(0, 70));
+      }
+    });
+    document.body.setAttribute("data-clipped-maths", JSON.stringify(clipped));
+  }
+  window.addEventListener("load", function () { setTimeout(measure, 0); });
+})();
+</script>"""
+MEASURE_WIDTH = 1280
+
+
 class _QuietHandler(http.server.SimpleHTTPRequestHandler):
     def log_message(self, *args):
         pass
+
+    def do_GET(self):
+        path = pathlib.Path(self.translate_path(self.path))
+        if path.is_dir():
+            path = path / "index.html"
+        if path.suffix != ".html" or not path.is_file():
+            return super().do_GET()
+        body = path.read_bytes().replace(b"</body>", MEASURE_MATHS.encode() + b"</body>", 1)
+        self.send_response(200)
+        self.send_header("Content-Type", "text/html; charset=utf-8")
+        self.send_header("Content-Length", str(len(body)))
+        self.end_headers()
+        self.wfile.write(body)
+
+
+def clipped_maths(dom: str):
+    """The measuring script's list of equations wider than their box, or None if it did
+    not run."""
+    found = re.search(r'data-clipped-maths="([^"]*)"', dom)
+    return None if found is None else json.loads(html.unescape(found.group(1)))
 
 
 def _serve(site):
@@ -266,7 +318,14 @@ def check_browser(site, out):
                 if not _parse(path).maths:
                     continue
                 url = root + rel.removesuffix("index.html")
-                dom = _browser(chromium, profile, "--virtual-time-budget=10000", "--dump-dom", url)
+                dom = _browser(
+                    chromium,
+                    profile,
+                    f"--window-size={MEASURE_WIDTH},1400",
+                    "--virtual-time-budget=10000",
+                    "--dump-dom",
+                    url,
+                )
                 maths = len(re.findall(r'class="arithmatex', dom.stdout))
                 done = len(re.findall(r'data-rendered="1"', dom.stdout))
                 katex = len(re.findall(r'class="katex"', dom.stdout))
@@ -277,6 +336,11 @@ def check_browser(site, out):
                         f"{katex} KaTeX nodes, {errors} KaTeX errors)"
                     )
                 rendered += done
+                clipped = clipped_maths(dom.stdout)
+                if clipped is None:
+                    problems.append(f"{rel}: the equation widths were not measured")
+                for item in clipped or ():
+                    problems.append(f"{rel}: at {MEASURE_WIDTH} px an equation is {item}")
             for page in SCREENSHOTS:
                 name = (page.strip("/").replace("/", "-") or "index") + ".png"
                 shot = _browser(

@@ -9,7 +9,7 @@ from .._custom_types import FloatScalar, plain_int, runtime_float
 from .._norms import scaled_rms_norm
 from .._results import RESULTS
 from .base import AbstractController, StepInfo, check_step_factors
-from .events import land_before_event
+from .events import event_margin, land_before_event
 
 
 class PIDController(AbstractController):
@@ -55,7 +55,9 @@ class PIDController(AbstractController):
       starts within 1% of its size from the event steps over it (the event then
       sits at the start of the step, where the scheme resolves it). Rejection by the
       error test stays the safety net.
-    - `event_margin`: relative distance short of the predicted event to land at.
+    - `event_margin`: relative distance short of the predicted event to land at;
+      `None` (default) follows the tolerance, $\min(10^{-8}, 10^{-2}\,\text{rtol})$, so
+      that the time an impact is applied early does not floor the error.
     """
 
     rtol: FloatScalar = eqx.field(default=1e-3, converter=runtime_float)
@@ -72,7 +74,7 @@ class PIDController(AbstractController):
     nonlinear_factor: float = 0.25
     error_order: int | None = eqx.field(static=True, default=None, converter=plain_int)
     event_prediction: bool = eqx.field(static=True, default=True)
-    event_margin: float = 1e-8
+    event_margin: float | None = None
 
     def __check_init__(self):
         for name in ("rtol", "atol", "safety"):
@@ -160,7 +162,8 @@ class PIDController(AbstractController):
         factor = jax.lax.stop_gradient(factor)
         h_next = info.h * factor
         if self.event_prediction:
-            h_next = land_before_event(info, accept, ok, h_next, self.event_margin)
+            margin = event_margin(self.event_margin, self.rtol)
+            h_next = land_before_event(info, accept, ok, h_next, margin)
         if self.h_max is not None:
             h_next = jnp.minimum(h_next, self.h_max)
         new_state = (jnp.where(accept, inv, prev), jnp.where(accept, prev, prev_prev), ~accept)

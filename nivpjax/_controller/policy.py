@@ -13,7 +13,7 @@ from jaxtyping import Array, Bool, Float
 from .._norms import scaled_rms_norm
 from .._results import RESULTS
 from .base import AbstractController, StepInfo, check_step_factors
-from .events import land_before_event
+from .events import event_margin, land_before_event
 from .features import AbstractFeatures, FeatureMemory, StepFeatures
 from .pid import PIDController
 
@@ -83,7 +83,7 @@ class PolicyController(AbstractController):
     policy_accepts: bool = eqx.field(static=True, default=False)
     differentiable_factor: bool = eqx.field(static=True, default=False)
     event_prediction: bool = eqx.field(static=True, default=True)
-    event_margin: float = 1e-8
+    event_margin: float | None = None
 
     def __check_init__(self):
         if not callable(self.policy):
@@ -182,7 +182,8 @@ class PolicyController(AbstractController):
         new_state = self._remember(state, err, accept, ok, phi)
         h_next = info.h * self.step_factor(out[0], new_state)
         if self.event_prediction:
-            h_next = land_before_event(info, accept, ok, h_next, self.event_margin)
+            margin = event_margin(self.event_margin, self.rtol)
+            h_next = land_before_event(info, accept, ok, h_next, margin)
         if self.h_max is not None:
             h_next = jnp.minimum(h_next, self.h_max)
         if not self.differentiable_factor:

@@ -6,6 +6,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._cache import CachedJit
 from .._controller import ConstantStepSize, PIDController
 from .._nonlinear import FixedPointVI, SemismoothNewton
 from .._projector import (
@@ -18,7 +19,7 @@ from .._projector import (
 )
 from .._solve import solve
 from .._stepper import BackwardEuler, Bathe, EmbeddedBETR, Theta, Trapezoidal
-from . import _options as opt
+from . import _host, _options as opt
 
 
 METHODS = ("backward_euler", "trapezoidal", "theta", "composite", "embedded_betr")
@@ -46,7 +47,7 @@ def _slices_to_indices(component_slices, n):
     return out
 
 
-def _projector(name, popts, n, component_slices):
+def _projector(name, popts, n, component_slices, t0, y0, hosted):
     mapped, no_effect = opt.PROJECTION_OPTS[name]
     opt.check(f"projection_opts for '{name}'", popts, mapped, no_effect)
     if name == "identity":
@@ -73,28 +74,53 @@ def _projector(name, popts, n, component_slices):
         ci = np.asarray(ci, dtype=int)
         arity = _n_positional(con_force)
 
-        def bound(t, y, args):
+        def con_force_ty(t, y):
             call = (y,) if arity == 1 else (y, t) if arity == 2 else (y, t, None)
-            return jnp.asarray(con_force(*call))[ci]
+            return con_force(*call)
+
+        force = _host.adapt(
+            con_force_ty, "con_force_func", "(t, y)", (t0, y0), hosted=hosted, source=con_force
+        )
+
+        def bound(t, y, args):
+            return jnp.asarray(force(t, y))[ci]
 
         return BlockProjector([(ci, CoulombFriction(bound))])
     if name == "unilateral":
         for key in ("gap", "J_u", "G_apply"):
             if key not in popts:
                 raise ValueError(f"projection 'unilateral' needs projection_opts `{key}`.")
-        gap, J_u, G_apply = popts["gap"], popts["J_u"], popts["G_apply"]
+        gap = _host.adapt(popts["gap"], "gap", "(t, y)", (t0, y0), hosted=hosted)
+        J_u = _host.adapt(popts["J_u"], "J_u", "(t, y)", (t0, y0), hosted=hosted)
+        m = jax.eval_shape(lambda t, y: jnp.atleast_1d(gap(t, y)), t0, y0).shape[0]
+        G_apply = _host.adapt(
+            popts["G_apply"], "G_apply", "(t, y, lam)", (t0, y0, np.zeros(m)), (n,), hosted
+        )
         gap_tol = popts.get("gap_tol", 0.0)
 
         def impulse_map(t, y, args):
             m = jnp.atleast_1d(gap(t, y)).shape[0]
             return jax.jacfwd(lambda lam: jnp.asarray(G_apply(t, y, lam)))(jnp.zeros(m, y.dtype))
 
-        return UnilateralContact(
+        velocity_map = lambda t, y, a: jnp.atleast_2d(J_u(t, y))  # noqa: E731
+        rows = _contact_rows(velocity_map, impulse_map, t0, y0)
+        common = dict(
             gap=lambda t, y, a: jnp.atleast_1d(gap(t, y)) - gap_tol,
-            velocity_map=lambda t, y, a: jnp.atleast_2d(J_u(t, y)),
-            impulse_map=impulse_map,
             restitution=popts.get("e", 0.0),
         )
+        if rows.all():
+            return UnilateralContact(velocity_map=velocity_map, impulse_map=impulse_map, **common)
+        # The contact acts on the rows its impulses move (a ball's velocity), as a scene's
+        # does: the other rows (positions) are then free rows, interpolated at `t_eval`
+        # with their rates instead of linearly.
+        idx = np.flatnonzero(rows)
+        cols = idx.tolist()  # a list in the closures: static indices, not a traced array
+        contact = UnilateralContact(
+            velocity_map=lambda t, y, a: velocity_map(t, y, a)[:, cols],
+            impulse_map=lambda t, y, a: impulse_map(t, y, a)[cols, :],
+            **common,
+        )
+        return BlockProjector([(idx, contact)])
     # soccp
     blocks = popts.get("blocks", popts.get("constraint_indices"))
     if blocks is None:
@@ -106,8 +132,37 @@ def _projector(name, popts, n, component_slices):
     mu = popts.get("mu", popts.get("get_mu"))
     if mu is None:
         raise ValueError("projection 'soccp' needs `mu` (float or callable mu(y)).")
+    if callable(mu):
+        mu = _host.adapt(mu, "mu", "(y)", (y0,), hosted=hosted)
     mu_fn = (lambda t, y, a: mu(y)) if callable(mu) else mu
     return BlockProjector([(np.asarray(b, int), SecondOrderCone(mu_fn)) for b in blocks])
+
+
+def _maps_at(velocity_map, impulse_map, ts, ys):
+    return jax.vmap(lambda t, y: (velocity_map(t, y, None), impulse_map(t, y, None)))(ts, ys)
+
+
+# Compiled once per model structure (closed-over arrays are run-time values): the probes
+# below cost a program call, not a few hundred eager operations, on every drop-in call.
+_maps_at_jit = CachedJit(_maps_at)
+
+
+def _contact_rows(velocity_map, impulse_map, t0, y0, probes=3):
+    """The rows a contact can touch: those its impulses move or its velocities read (a
+    static mask). The sparsity of `J_u` and of `G_apply`'s impulse map, at `y0` and at
+    random states around it (so that an entry zero by coincidence at `y0`, `sin 0`, does
+    not hide a row); all rows if any evaluation fails."""
+    rng = np.random.default_rng(0)
+    scale = 1 + np.abs(y0)
+    ys = np.concatenate([y0[None], y0 + rng.standard_normal((probes, y0.size)) * scale])
+    ts = np.concatenate([[t0], t0 + rng.standard_normal(probes)])
+    try:
+        W, B = (np.asarray(a) for a in _maps_at_jit(velocity_map, impulse_map, ts, ys))
+    except Exception:  # a map undefined away from y0: no restriction
+        return np.ones(y0.size, bool)
+    if W.shape[-1] != y0.size or B.shape[1] != y0.size:
+        return np.ones(y0.size, bool)
+    return np.any(W != 0, axis=(0, 1)) | np.any(B != 0, axis=(0, 2))
 
 
 def _solver(name, sopts):
@@ -221,9 +276,20 @@ def solve_ivp_ns(
     *,
     max_steps=20000,
     throw=True,
+    t_eval=None,
 ):
     r"""Drop-in for `solve_nivp.solve_ivp_ns`: same arguments and return values, computed by
-    [`nivpjax.solve`][]. Write `fun(t, y)` and the projection callbacks with `jax.numpy`.
+    [`nivpjax.solve`][], in float64 as the reference (whatever `jax_enable_x64` says: x64
+    is switched on for the call only, and the results are NumPy arrays).
+
+    `fun(t, y)` and the projection callbacks (`gap`, `J_u`, `G_apply`, `con_force_func`,
+    `mu`) are best written with `jax.numpy`. Written with NumPy (`np.array([y[1], -9.81])`)
+    they still work: each one JAX cannot trace runs on the host through
+    `jax.pure_callback`, with derivatives by central finite differences, and a
+    [`nivpjax.compat.NumpyModelWarning`][] says once per model that this is slow and how
+    to convert it. A callable that cannot run either way (it writes into its input,
+    returns the wrong shape, or fails on NumPy arrays too) raises
+    [`nivpjax.compat.ModelError`][] before any work, saying what to change.
 
     What is the same: method names (`'composite'` is Bathe's scheme with $\gamma = 1/2$, i.e.
     TR-BDF2), projection names and their main options, solver names, tolerances, `h0`, `A`,
@@ -253,7 +319,12 @@ def solve_ivp_ns(
       `(m - 1, n)`, the stage residual (constraint reaction per unit time) after each step;
       `info[i] = (residual_norm, success, iterations)` of that step.
 
-    Extra keyword arguments: `max_steps` (attempted steps), `throw`.
+    Extra keyword arguments: `max_steps` (attempted steps), `throw`, and `t_eval`
+    (scipy's name): times in `t_span` at which to return the solution, for plots. With it,
+    `t` is `t_eval` and `y` the solution there, interpolated as [`nivpjax.solve`][] does
+    (third order between steps, impacts and switches inside a step located); `h`, `fk`
+    and `info` still describe the steps taken. Without it, `t` and `y` are the accepted
+    steps, which for a bouncing ball land just before each impact: a plot of them is flat.
     Unsupported options raise `ValueError` naming them.
     """
     projection_opts = dict(projection_opts or {})
@@ -271,15 +342,78 @@ def solve_ivp_ns(
         t0, t1 = (float(t) for t in t_span)
     except (TypeError, ValueError):
         raise ValueError(f"`t_span` must be a pair (t0, tf), got {t_span!r}.") from None
-    y0 = np.asarray(y0, dtype=float) if not hasattr(y0, "dtype") else y0
-    y0 = jnp.atleast_1d(jnp.asarray(y0))
-    if not jnp.issubdtype(y0.dtype, jnp.floating):
-        y0 = y0.astype(float)
+    if not callable(fun) or _n_positional(fun) < 2:
+        raise ValueError("`fun` must accept (t, y).")
+    # The reference computes in float64 (`np.array(y0, dtype=float)`), whatever the caller's
+    # dtype: so does the drop-in, with x64 on for this call only (it returns NumPy arrays,
+    # so no float64 JAX array leaks out).
+    with jax.enable_x64(True):
+        return _solve_float64(
+            fun,
+            t0,
+            t1,
+            y0,
+            method.lower(),
+            pname,
+            solver.lower(),
+            projection_opts,
+            solver_opts,
+            integrator_opts,
+            adaptive_opts,
+            adaptive,
+            atol,
+            rtol,
+            h0,
+            component_slices,
+            verbose,
+            A,
+            skip_error_indices,
+            return_attempts,
+            max_steps,
+            throw,
+            t_eval,
+        )
+
+
+def _solve_float64(
+    fun,
+    t0,
+    t1,
+    y0,
+    method,
+    pname,
+    solver,
+    projection_opts,
+    solver_opts,
+    integrator_opts,
+    adaptive_opts,
+    adaptive,
+    atol,
+    rtol,
+    h0,
+    component_slices,
+    verbose,
+    A,
+    skip_error_indices,
+    return_attempts,
+    max_steps,
+    throw,
+    t_eval,
+):
+    try:
+        y0 = np.atleast_1d(np.array(y0, dtype=np.float64))
+    except (TypeError, ValueError):
+        raise ValueError(f"`y0` must be a 1-D array of real numbers, got {y0!r}.") from None
+    if y0.ndim != 1:
+        raise ValueError(f"`y0` must be 1-D, got shape {y0.shape}.")
     n = y0.shape[0]
 
-    projector = _projector(pname, projection_opts, n, component_slices)
-    nl_solver = _solver(solver.lower(), solver_opts)
-    stepper = _stepper(method.lower(), nl_solver, integrator_opts)
+    hosted = {}
+    rhs = _host.adapt(fun, "fun", "(t, y)", (t0, y0), (n,), hosted)
+    projector = _projector(pname, projection_opts, n, component_slices, t0, y0, hosted)
+    _host.warn_once(hosted)
+    nl_solver = _solver(solver, solver_opts)
+    stepper = _stepper(method, nl_solver, integrator_opts)
     algebraic = np.zeros(n, bool) if A is None else np.all(np.asarray(A) == 0, axis=1)
     controller, h_init = _controller(
         adaptive,
@@ -292,12 +426,9 @@ def solve_ivp_ns(
         component_slices,
         algebraic,
     )
-    arity = _n_positional(fun)
-    if arity < 2:
-        raise ValueError("`fun` must accept (t, y).")
 
     def vector_field(t, y, args):
-        return jnp.asarray(fun(t, y))
+        return jnp.asarray(rhs(t, y))
 
     sol = solve(
         vector_field,
@@ -310,6 +441,7 @@ def solve_ivp_ns(
         stepper=stepper,
         controller=controller,
         h0=h_init,
+        t_eval=t_eval,
         max_steps=max_steps,
         save_attempts=return_attempts,
         throw=throw,
@@ -318,8 +450,12 @@ def solve_ivp_ns(
     # Cut on the host: slicing device arrays to a data-dependent length would compile a new
     # slice program for every step count (most of a repeated call's time).
     rows = int(sol.n_accepted) + 1
-    t = np.asarray(sol.ts)[:rows]
-    y = np.asarray(sol.ys)[:rows]
+    if t_eval is None:
+        t = np.asarray(sol.ts)[:rows]
+        y = np.asarray(sol.ys)[:rows]
+    else:
+        t = np.asarray(sol.t_eval)
+        y = np.asarray(sol.y_eval)
     h = np.asarray(sol.hs)[:rows]
     fk = np.asarray(sol.multipliers)[1:rows]
     info = [
