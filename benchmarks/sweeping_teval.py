@@ -21,7 +21,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import nivpjax as nj
-from nivpjax._loop import interpolate
+from nivpjax._loop import interpolate, interpolate_multipliers
 from nivpjax._model import Model
 from nivpjax._validate import check_mass_matrix
 
@@ -132,14 +132,17 @@ def _model(vector_field, projector, mass_matrix, equation_rows, n):
 
 
 def _interpolate(model, sol, t_eval, args):
-    return interpolate(sol, t_eval, model, args)
+    # What `t_eval` adds to a solve: the states and the multipliers there.
+    y_eval = interpolate(sol, t_eval, model, args)
+    return y_eval, interpolate_multipliers(sol, t_eval, y_eval, model, args)
 
 
 def cost_table(repeats):
     """The solve (as a user calls it: concrete arguments, nivpjax's own compiled program)
-    against the interpolation at 1000 output times of its solution (`interpolate`, jitted
-    alone: the whole cost `t_eval` adds; timing the solve with and without `t_eval` reads
-    the load of a shared machine instead), per scene, Bathe at rtol 1e-6."""
+    against the interpolation at 1000 output times of its solution (`interpolate` and
+    `interpolate_multipliers`, jitted alone: the whole cost `t_eval` adds; timing the
+    solve with and without `t_eval` reads the load of a shared machine instead), per
+    scene, Bathe at rtol 1e-6."""
     controller = nj.PIDController(rtol=1e-6, atol=1e-8)
     cases = {}
     for label, (scene, x0, args), t1 in [
@@ -161,7 +164,7 @@ def cost_table(repeats):
     run = lambda args: sweeping_solve(nj.Bathe(), 1e-6, None)  # noqa: E731
     cases["sweeping process"] = (run, None, sweeping, T1)
     lines = [
-        "| scene | steps | solve | interpolation at 1000 `t_eval` | ratio |",
+        "| scene | steps | solve | states and multipliers at 1000 `t_eval` | ratio |",
         "|---|---|---|---|---|",
     ]
     for label, (run, args, model, t1) in cases.items():

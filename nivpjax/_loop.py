@@ -6,6 +6,7 @@ import jax
 import jax.numpy as jnp
 
 from ._controller import AbstractController, StepInfo
+from ._held import selections_inside
 from ._hermite import cubic_hermite
 from ._model import Model
 from ._results import RESULTS
@@ -408,7 +409,10 @@ def interpolate(sol: Solution, t_eval, model: Model | None = None, args=None):
     start it (`Model.step_start`: the impacts closing at its start applied, the
     right-limit selections there), by the cubic Hermite interpolant of the two end states
     and rates (third order: local error $O(h^4)$; exact for a ball's parabola, whose
-    steps event prediction makes long), linearly on algebraic rows (multipliers).
+    steps event prediction makes long), linearly on algebraic rows (multipliers), except
+    selection rows, which take the selection of their phase at `t`
+    (`_held.selections_inside`: a sliding mode's equivalent control, split where the
+    phase begins or ends inside the step).
 
     On rows a projector moves (`Model.rated_rows`), the rates are the ones the state
     takes (`Model.projected_rate`: zero normal motion where a set holds a row at a
@@ -467,7 +471,8 @@ def _in_step(model: Model, t, w, t0, y0, t1, y1, args):
     if not model.rated_rows.any():
         projected = jnp.asarray(model.projector.acts_on(y0.shape[0]))
         hermite = cubic_hermite(y0, y1, h * r0, h * r1, w)
-        return jnp.where(model.algebraic | projected, linear, hermite)
+        y = jnp.where(model.algebraic | projected, linear, hermite)
+        return _selections(model, t, t0, y0, t1, y1, y, args)
     p0, held0 = model.projected_rate(t0, h, y0, f0, args)
     p1, held1 = model.projected_rate(t1, h, y1, f1, args)
     sets = model.held_rows
@@ -483,7 +488,43 @@ def _in_step(model: Model, t, w, t0, y0, t1, y1, args):
         da0 = h * _rate_change(model, t0, y0, p0, args)
         y = jnp.where(stuck, _stuck(y0, y1, p0, da0, h, w), y)
     y = jnp.where(model.algebraic, linear, y)
-    return model.project_rows(t, h, y, sets, args)
+    y = model.project_rows(t, h, y, sets, args)
+    return _selections(model, t, t0, y0, t1, y1, y, args)
+
+
+def _selections(model: Model, t, t0, y0, t1, y1, y, args):
+    # The selection rows (a relay's w) by the phase they are in at t (see
+    # `_held.selections_inside`); linear where the model has none.
+    if not model.has_selections:
+        return y
+    return selections_inside(model, t, t0, y0, t1, y1, y, args)
+
+
+def interpolate_multipliers(sol: Solution, t_eval, y_eval, model: Model, args=None):
+    r"""The constraint reactions at `t_eval` (units of $f$: a force, per unit mass where
+    $f$ is an acceleration), each inside its set, from the states `y_eval` that
+    `interpolate` gives there; NaN where `y_eval` is.
+
+    The reaction the interpolated state takes (`Model.reaction_at`): it inherits the
+    states' piecewise rule, so a phase that begins or ends inside a step splits it where
+    the states do (a face reached, a stick reached: the reaction is zero, or the law's
+    slip value, up to the instant the state arrives) and follows the stepper's order
+    elsewhere (a friction force in slip at the interpolated state; a box's normal force
+    $-f$ at the interpolated time). Contacts: zero in flight, the resting force where a
+    contact holds the body; an impact is an impulse, which no force at an instant
+    describes (the `multipliers` buffer's row of that step holds impulse / h)."""
+    if sol.ts is None:
+        # Steps not saved: the last step's size (it only sets the JVP's point).
+        h = jnp.broadcast_to(sol.h_last, t_eval.shape)
+    else:
+        k = sol.n_accepted
+        idx = jnp.searchsorted(sol.ts, t_eval, side="right") - 1
+        idx = jnp.clip(idx, 0, jnp.maximum(k - 1, 0))
+        span = sol.ts[jnp.minimum(idx + 1, k)] - sol.ts[idx]
+        h = jnp.where(span > 0, span, 1.0)
+    safe_y = jnp.where(jnp.isfinite(y_eval), y_eval, 0.0)
+    out = jax.vmap(lambda t, h, y: model.reaction_at(t, h, y, args))(t_eval, h, safe_y)
+    return jnp.where(jnp.isnan(y_eval), jnp.nan, out)
 
 
 def _rate_change(model: Model, t, y, rate, args):

@@ -339,14 +339,62 @@ class Model(eqx.Module):
         (float32: a state at a face would then read as inside the set, free)."""
         if not self.rated_rows.any():
             return self.to_state(f), jnp.zeros(y.shape, bool)
-        rows = jnp.asarray(self.rated_rows) & ~self.algebraic
+        moved, rows = self._moved_rate(t, h, y, f, args, self.rated_rows)
+        return self.to_state(moved), rows & (moved != f)
+
+    def _moved_rate(self, t, h, y, f, args, rows):
+        # `f` projected on the differential rows of the mask `rows` (units of f), and those
+        # rows.
+        rows = jnp.asarray(rows) & ~self.algebraic
         f_rows = jnp.where(rows, f, 0.0)
         finfo = jnp.finfo(y.dtype)
         speed = jnp.max(jnp.abs(f_rows)) / (1 + jnp.max(jnp.abs(y)))
         h = jnp.where(h > 0, h, 1.0)
         s = jnp.clip(64 * finfo.eps / jnp.maximum(speed, finfo.tiny), 1e-6 * h, 1e-2 * h)
-        moved = jnp.where(rows, self._prox_rate(t, s, y, f_rows, args), f)
-        return self.to_state(moved), rows & (moved != f)
+        return jnp.where(rows, self._prox_rate(t, s, y, f_rows, args), f), rows
+
+    def reaction_at(self, t, h, y, args):
+        r"""The constraint reaction at the state `(t, y)` (units of $f$; a row of the
+        `multipliers` buffer's instantaneous counterpart), inside its set:
+
+        - on the differential rows a projector acts on, the projected rate minus the
+          vector field (`_moved_rate`): zero where the row is free, $-f$ on the normal
+          rows where a set holds the state at a face (exactly: the projection's derivative
+          there is 0), the law's reaction on a proximal map's rows (friction:
+          $-c \operatorname{sign} v$ in slip, the holding force in stick), put into its
+          bound (`project_reaction`). On a contact's velocity rows: zero off contact, the
+          resting force where the contact holds the body (the one-sided derivative of its
+          impulse, $\ge 0$: a resting ball's $g$); an impact is an impulse, not a force,
+          and has none;
+        - on algebraic rows, the row's residual $-f(t, y)$, as in the buffer;
+        - zero on the other rows.
+
+        `h` only sets the JVP's point (see `projected_rate`)."""
+        f = self.f(t, y, args)
+        out = jnp.where(self.algebraic, -f, 0.0)
+        acts = np.asarray(self.projector.acts_on(y.shape[0]), bool)
+        if not acts.any():
+            return out
+        moved, rows = self._moved_rate(t, h, y, f, args, acts)
+        reaction = jnp.where(rows, moved - f, out)
+        if self.has_weighed:
+            reaction = self.project_reaction(t, y, reaction, args)
+        return reaction
+
+    def project_reaction(self, t, y, r, args):
+        r"""`r` with the rows of a proximal map (`weighed`: friction) put into the map's
+        reaction set at `(t, y)` by the projector itself, through Moreau's decomposition
+        at unit weight: with $P$ the map $P(z) = z - \operatorname{proj}_C(z)$ (friction:
+        soft thresholding by the bound $c$, $C$ its interval or disk),
+        $\operatorname{proj}_C(r) = r - P(r)$. On an interval this is exact for a value
+        within a factor 2 of the bound (Sterbenz's lemma: $P(r) = r \mp c$ without
+        rounding), as a reaction computed as $(F - c) - F$ is: it comes back as $\mp c$ bit
+        for bit, where it could lie half an ulp of $F$ past the bound."""
+        ctx = ProjectionContext(
+            t=t, h=jnp.ones_like(t), y_prev=y, y_iter=y, rho=jnp.ones_like(y), args=args
+        )
+        moreau = r - self.projector(jnp.where(self.weighed, r, y), ctx)
+        return jnp.where(self.weighed, moreau, r)
 
     def project_rows(self, t, h, y, rows, args):
         """`y` with the rows `rows` (a boolean mask) replaced by the projector's value at

@@ -67,6 +67,17 @@ class Solution(eqx.Module):
     - `t_eval`, `y_eval`: the solution at the requested output times (cubic Hermite
       interpolation between accepted steps on differential rows, with projected rates and
       values on rows a set constrains; linear on algebraic rows), or `None`.
+    - `multipliers_eval`: the constraint reactions at `t_eval` (as `multipliers`, units
+      of $f$: a force, per unit mass where $f$ is an acceleration; never an impulse),
+      each inside its set (a box's normal force at a face, zero off it; a friction force
+      within its bound, bit for bit on an interval; a contact's force zero in flight and
+      the resting force where the contact holds the body), or `None`. They are the
+      reactions the interpolated state takes: the stepper's order inside a phase, split
+      where a phase begins or ends inside a step. An impact is an impulse and has no
+      force at an instant (the `multipliers` row of its step holds impulse / h).
+      Selections that are states (a relay's $w$ on an algebraic row) are in `y_eval`, by
+      the same rule: the projected equivalent control in a sliding mode, the start's
+      value until the switching function changes sign, $|w| \\le 1$ bit for bit.
     - `attempts`: an [`nivpjax.AttemptLog`][] or `None`.
     """
 
@@ -87,6 +98,7 @@ class Solution(eqx.Module):
     t_eval: Float[Array, " m"] | None = None
     y_eval: Float[Array, "m n"] | None = None
     attempts: AttemptLog | None = None
+    multipliers_eval: Float[Array, "m n"] | None = None
 
     def trimmed(self) -> "Solution":
         """A copy with buffers cut to the accepted steps (needs concrete, unbatched values)."""
@@ -111,4 +123,5 @@ class Solution(eqx.Module):
             t_eval=self.t_eval,
             y_eval=self.y_eval,
             attempts=attempts,
+            multipliers_eval=self.multipliers_eval,
         )

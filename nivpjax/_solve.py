@@ -11,7 +11,7 @@ import numpy as np
 from . import _validate as v
 from ._cache import CachedJit
 from ._controller import AbstractController
-from ._loop import interpolate, run
+from ._loop import interpolate, interpolate_multipliers, run
 from ._model import Model
 from ._progress_meter import progress_callback
 from ._projector import AbstractProjector
@@ -82,8 +82,9 @@ def solve(
     - `t_eval`: optional output times in $[t_0, t_1]$; the solution there is interpolated
       into `Solution.y_eval`: cubic Hermite on differential rows, from each step's start as
       the stepper took it, with the projected rates on rows a set constrains and each value
-      projected back into its set; linear on algebraic rows (see
-      `nivpjax._loop.interpolate` and the error-control page).
+      projected back into its set; selections (a relay's $w$) by the phase they are in,
+      other algebraic rows linear (see `nivpjax._loop.interpolate` and the error-control
+      page). The constraint reactions there go into `Solution.multipliers_eval`.
     - `saveat`: what to keep, a [`nivpjax.SaveAt`][]; default `SaveAt(steps=True)`: every
       accepted step (and the states at `t_eval` if given). `SaveAt()` keeps only the final
       state, `SaveAt(ts=...)` (or `SaveAt()` with `t_eval`) the final state and the states
@@ -220,10 +221,11 @@ def _solve_impl(
     if t_eval is not None:
         # Without saved steps the loop filled `y_eval` itself.
         y_eval = interpolate(sol, t_eval, model, args) if save_steps else sol.y_eval
+        multipliers_eval = interpolate_multipliers(sol, t_eval, y_eval, model, args)
         sol = eqx.tree_at(
-            lambda s: (s.t_eval, s.y_eval),
+            lambda s: (s.t_eval, s.y_eval, s.multipliers_eval),
             sol,
-            (t_eval, y_eval),
+            (t_eval, y_eval, multipliers_eval),
             is_leaf=lambda x: x is None,
         )
     if throw_inside:
