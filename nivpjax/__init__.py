@@ -37,6 +37,7 @@ from ._projector import (
     ProjectionContext as ProjectionContext,
     SecondOrderCone as SecondOrderCone,
     SignResolvent as SignResolvent,
+    HeldGaps as HeldGaps,
     UnilateralContact as UnilateralContact,
     clip as clip,
     default_context as default_context,

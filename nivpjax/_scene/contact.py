@@ -3,7 +3,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._projector import Bound, UnilateralContact
+from .._projector import Bound, HeldGaps, UnilateralContact
 from .base import AbstractEffect, scene_state
 
 
@@ -60,7 +60,8 @@ class Contact(AbstractEffect):
             restitution=self.restitution,
             lookahead=self.lookahead,
         )
-        return [(self.velocities, projector)]
+        held = HeldGaps(projector, self.velocities)
+        return [(self.velocities, projector), (self.positions, held)]
 
 
 class _Gaps(eqx.Module):
