@@ -3,6 +3,7 @@
 from collections.abc import Callable
 from typing import Any
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -30,7 +31,10 @@ class UnilateralContact(AbstractProjector):
     projected vector, and so the columns of `velocity_map` and rows of `impulse_map`, are
     those of the block (e.g. the velocity components only).
 
-    and `restitution` $e$ (scalar or per contact, array or callable).
+    and `restitution` $e$ (scalar or per contact, array or callable). With `weighed`
+    (static, default `False`; [`nivpjax.Contact`][] sets it for curved gaps), the reaction
+    of the contacts that rest under a pressing flow is weighed like the vector field by
+    the theta family's stages (see `weighed_rows`).
 
     A contact is active in a stage when it is closed at the stage's start,
     $g(y_{\text{prev}}) \le \max(16\,\varepsilon\,(1 + \|y_{\text{prev}}\|_\infty),\,
@@ -64,6 +68,7 @@ class UnilateralContact(AbstractProjector):
     impulse_map: Callable[[Any, Any, Any], Any] | None = None
     restitution: Bound = 0.0
     lookahead: float = 0.5
+    weighed: bool = eqx.field(static=True, default=False)
 
     def _start(self, ctx: ProjectionContext, dtype):
         # Everything decided at the start of the stage: contact velocities, impulse map,
@@ -171,10 +176,12 @@ class UnilateralContact(AbstractProjector):
         return gap0, u_minus, active & (u_minus < -self._roundoff_velocity(u_minus))
 
     def weighed_rows(self, n: int) -> np.ndarray:
-        """Every row: a persistent contact's reaction is a bounded force that turns with
-        the normal and varies with the load along a closed phase (a bead against a curved
-        wall), which a second-order stage weighs at both ends."""
-        return np.ones(n, bool)
+        """Every row with `weighed`: a persistent contact's reaction is then a bounded
+        force that turns with the normal and varies with the load along a closed phase (a
+        bead against a curved wall), which a second-order stage weighs at both ends (only
+        the contacts `pressed` at the point: `ProjectionContext.law`). None otherwise: on
+        a flat contact the holding force stays at the stage's end."""
+        return np.full(n, self.weighed, bool)
 
     def violation(self, ctx: ProjectionContext):
         r"""Penetration at the end of the step of contacts that were open at its start (not
