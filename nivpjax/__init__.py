@@ -32,6 +32,7 @@ from ._projector import (
     CoulombFriction as CoulombFriction,
     CustomProjector as CustomProjector,
     EventLocated as EventLocated,
+    HeldGaps as HeldGaps,
     Identity as Identity,
     NonNegative as NonNegative,
     ProjectionContext as ProjectionContext,

@@ -289,7 +289,6 @@ class Model(eqx.Module):
         """The reaction (units of $f$) of the weighed rows' law at `(t, y)` under the
         smooth rate `f`, zero on other rows; `h` only sets the JVP's point $10^{-6} h$
         (see `_weighed_start`)."""
-        f = jnp.where(self.weighed, f, 0.0)
         s = 1e-6 * jnp.where(h > 0, h, 1.0)
         return jnp.where(self.weighed, self._prox_rate(t, s, y, f, args) - f, 0.0)
 
@@ -303,11 +302,22 @@ class Model(eqx.Module):
         # The stage's fixed point y = P(y - rho R) takes R in the units of f: at s -> 0 the
         # point projected is y + s f (per row of a diagonal A), not y + s A^-1 f.
 
+        # Contacts read the state's rate to tell a persistent contact (see `law`).
+        start_rate = jax.lax.stop_gradient(self.to_state(f)) if self.has_impulses else None
+
         def prox(s):
+            z = y + s * f
             ctx = ProjectionContext(
-                t=t, h=s, y_prev=y, y_iter=y, rho=jnp.full_like(y, s), args=args
+                t=t,
+                h=s,
+                y_prev=y,
+                y_iter=z,
+                rho=jnp.full_like(y, s),
+                args=args,
+                start_rate=start_rate,
+                law=True,
             )
-            return self.projector(y + s * f, ctx)
+            return self.projector(z, ctx)
 
         return jax.jvp(prox, (s,), (jnp.ones_like(s),))[1]
 

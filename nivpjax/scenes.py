@@ -284,3 +284,48 @@ def filippov_spiral(stiffness=300.0, coupling=0.02, x0=(5.0, 8.0)):
 
     scene = Scene(dynamics, 2, (Relay("w", lambda t, x, a: x, n=2),))
     return scene, _f(list(x0)), {"S": _f(stiffness), "a": _f(coupling)}
+
+
+def ball_in_bowl(
+    radius=1.0, gravity=9.81, position=(0.0, -1.0), velocity=(1.0, 0.0), restitution=0.0
+):
+    r"""A ball (a point of unit mass) inside a spherical bowl of radius $R$ under gravity:
+    $q'' = -g\,e_d$ with the unilateral contact $g(q) = R - |q| \ge 0$ and Newton
+    restitution $e$, in as many dimensions as `position` has (2: a circular wall, 3: a
+    sphere; gravity along the last axis). State $x = (q, v)$; `args = {"R", "g", "e"}`.
+
+    A closed contact on a curved gap: while the ball stays on the wall it is a pendulum,
+    $arphi'' = -(g/R)\sinarphi$ in 2-D ($arphi$ from the bottom), pressed by the
+    normal force $N = Rarphi'^2 + g\cosarphi$ (per unit mass). Thrown from the bottom
+    with speed $v_0$, $2gR < v_0^2 < 5gR$, it leaves the wall where $N$ reaches zero,
+    $\cosarphi_r = (2g R - v_0^2)/(3gR)$, flies a parabola inside the bowl and lands on
+    the wall again. With `gravity=0` it is a bead running uniformly round a circular wall
+    that pushes with $v^2/R$.
+    """
+    d = len(position)
+    if d < 2 or len(velocity) != d:
+        raise ValueError(
+            "`position` and `velocity` must have the same length, 2 or more, got "
+            f"{len(position)} and {len(velocity)}."
+        )
+
+    def dynamics(t, x, a, m):
+        down = jnp.zeros(d, x.dtype).at[-1].set(-a["g"])
+        return jnp.concatenate([x[d:], down])
+
+    def gap(t, x, a):
+        sq = jnp.sum(x[:d] ** 2)
+        # |q| with a finite derivative at the centre (which a flight may cross).
+        norm = jnp.where(sq > 0, jnp.sqrt(jnp.where(sq > 0, sq, 1.0)), 0.0)
+        return jnp.stack([a["R"] - norm])
+
+    contact = Contact(
+        gap,
+        positions=np.arange(d),
+        velocities=np.arange(d, 2 * d),
+        restitution=lambda t, y, a: a["e"],
+        curved=True,
+    )
+    x0 = _f([*position, *velocity])
+    args = {"R": _f(radius), "g": _f(gravity), "e": _f(restitution)}
+    return Scene(dynamics, 2 * d, (contact,)), x0, args

@@ -10,6 +10,7 @@ from .box import Box as Box, NonNegative as NonNegative, clip as clip
 from .contact import UnilateralContact as UnilateralContact
 from .coulomb import CoulombFriction as CoulombFriction
 from .custom import CustomProjector as CustomProjector
+from .held_gap import HeldGaps as HeldGaps
 from .identity import Identity as Identity
 from .lcp import lcp_solve as lcp_solve
 from .located import EventLocated as EventLocated

@@ -46,6 +46,12 @@ class ProjectionContext(eqx.Module):
       implicit function theorem), `False` during the nonlinear iteration. Projectors that
       pick the derivative's element by where the stage switched read it; values must not
       depend on it.
+    - `law`: `True` when the projector is evaluated for the reaction its law applies at a
+      point (`Model.law_reaction`: the one-sided derivative of $P_s(y + s f)$ at
+      $s \to 0^+$, which a stage of the theta family weighs at both ends). A projector
+      with impulses then keeps only its persistent contacts: an impact at that point
+      is no smooth reaction (its holding part would be read as a force that the
+      impact's flight never has).
     """
 
     t: Float[Array, ""]
@@ -60,6 +66,7 @@ class ProjectionContext(eqx.Module):
     start_rate: Float[Array, " n"] | None = None
     end_rate: Float[Array, " n"] | None = None
     tangent: bool = eqx.field(static=True, default=False)
+    law: bool = eqx.field(static=True, default=False)
 
     def restrict(self, v):
         """The components of a full-state vector `v` that belong to this block."""

@@ -89,6 +89,7 @@ class BlockProjector(AbstractProjector):
             start_rate=ctx.start_rate,
             end_rate=ctx.end_rate,
             tangent=ctx.tangent,
+            law=ctx.law,
         )
 
     def violation(self, ctx: ProjectionContext):

@@ -3,8 +3,10 @@
 from collections.abc import Callable
 from typing import Any
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from .base import AbstractProjector, Bound, ProjectionContext, resolve
 from .lcp import lcp_solve
@@ -29,7 +31,10 @@ class UnilateralContact(AbstractProjector):
     projected vector, and so the columns of `velocity_map` and rows of `impulse_map`, are
     those of the block (e.g. the velocity components only).
 
-    and `restitution` $e$ (scalar or per contact, array or callable).
+    and `restitution` $e$ (scalar or per contact, array or callable). With `weighed`
+    (static, default `False`; [`nivpjax.Contact`][] sets it for curved gaps), the reaction
+    of the contacts that rest under a pressing flow is weighed like the vector field by
+    the theta family's stages (see `weighed_rows`).
 
     A contact is active in a stage when it is closed at the stage's start,
     $g(y_{\text{prev}}) \le \max(16\,\varepsilon\,(1 + \|y_{\text{prev}}\|_\infty),\,
@@ -63,18 +68,13 @@ class UnilateralContact(AbstractProjector):
     impulse_map: Callable[[Any, Any, Any], Any] | None = None
     restitution: Bound = 0.0
     lookahead: float = 0.5
+    weighed: bool = eqx.field(static=True, default=False)
 
     def _start(self, ctx: ProjectionContext, dtype):
         # Everything decided at the start of the stage: contact velocities, impulse map,
         # and the active set from the predicted gap.
         y0 = ctx.y_prev
-        Wt = jnp.asarray(self.velocity_map(ctx.t, y0, ctx.args), dtype)
-        if Wt.ndim == 1:
-            Wt = Wt[None, :]
-        if self.impulse_map is None:
-            B = Wt.T
-        else:
-            B = jnp.asarray(self.impulse_map(ctx.t, y0, ctx.args), dtype).reshape(Wt.T.shape)
+        Wt, B = self._maps(ctx.t, y0, ctx.args, dtype)
         gap0 = jnp.atleast_1d(jnp.asarray(self.gap(ctx.t, y0, ctx.args), dtype))
         u_minus = Wt @ ctx.restrict(y0)
         # A contact is active when the gap predicted over the lookahead closes, and a closed
@@ -89,7 +89,7 @@ class UnilateralContact(AbstractProjector):
         if ctx.start_rate is None:
             a = jnp.zeros_like(u_minus)
         else:
-            a = Wt @ ctx.restrict(jnp.asarray(ctx.start_rate, dtype))
+            a = self._normal_acceleration(ctx, y0, ctx.start_rate, dtype)
         predicted = gap0 + lead * u_minus + 0.5 * jnp.maximum(a, 0.0) * lead**2 <= 0
         # For the same reason a contact closed only up to round-off (gap0 > 0) is not
         # active when the quadratic model never reaches it ($u^2 < 2 a g$): in float32 the
@@ -97,6 +97,15 @@ class UnilateralContact(AbstractProjector):
         graze = (a > 0) & (u_minus**2 < 2 * a * gap0)
         active = (predicted | self._resting(gap0, u_minus, y0, ctx.h)) & ~graze
         return Wt, B, gap0, u_minus, active
+
+    def _maps(self, t, y, args, dtype):
+        # The normals W^T and the impulse map B at the state y.
+        Wt = jnp.asarray(self.velocity_map(t, y, args), dtype)
+        if Wt.ndim == 1:
+            Wt = Wt[None, :]
+        if self.impulse_map is None:
+            return Wt, Wt.T
+        return Wt, jnp.asarray(self.impulse_map(t, y, args), dtype).reshape(Wt.T.shape)
 
     @staticmethod
     def _roundoff_velocity(u_minus):
@@ -123,21 +132,56 @@ class UnilateralContact(AbstractProjector):
     def _resting(cls, gap0, u_minus, y0, h):
         return cls._closed(gap0, u_minus, y0, h) & (u_minus <= cls._roundoff_velocity(u_minus))
 
-    def _end(self, ctx: ProjectionContext, Wt, dtype):
-        # Gaps and normal velocities at the end of the step, with the normals of its start.
+    def _end(self, ctx: ProjectionContext, dtype):
+        # Gaps and normal velocities at the end of the step, with the normals there (on a
+        # curved gap the start's normals read a body sliding along it as approaching).
         gap1 = jnp.atleast_1d(jnp.asarray(self.gap(ctx.t, ctx.y_iter, ctx.args), dtype))
-        return gap1, Wt @ ctx.restrict(ctx.y_iter)
+        Wt1, _ = self._maps(ctx.t, ctx.y_iter, ctx.args, dtype)
+        return gap1, Wt1 @ ctx.restrict(ctx.y_iter)
 
-    @staticmethod
-    def _end_acceleration(ctx: ProjectionContext, Wt, dtype):
+    def _normal_acceleration(self, ctx: ProjectionContext, y, rate, dtype):
+        # The rate of the normal velocities u = W^T(y) v along the state's rate y':
+        # W^T v' plus the curvature term (dW^T/dt) v (zero for gaps linear in the
+        # positions; v^2 / R on a circular wall of radius R, which the free flow leaves).
+        def normal_velocity(y):
+            return self._maps(ctx.t, y, ctx.args, dtype)[0] @ ctx.restrict(y)
+
+        rate = jnp.asarray(rate, dtype)
+        return jax.jvp(normal_velocity, (jnp.asarray(y, dtype),), (rate,))[1]
+
+    def _end_acceleration(self, ctx: ProjectionContext, dtype):
         # Normal accelerations of the vector field at the end of the step (`ctx.rate`).
         rate = jnp.zeros_like(ctx.y_iter) if ctx.rate is None else ctx.rate
-        return Wt @ ctx.restrict(jnp.asarray(rate, dtype))
+        return self._normal_acceleration(ctx, ctx.y_iter, rate, dtype)
+
+    def pressed(self, ctx: ProjectionContext, dtype):
+        """The contacts resting at the stage start that the free flow presses into: closed,
+        neither separating nor approaching faster than round-off (an impact is not a
+        persistent contact), and a negative normal acceleration of the vector field there,
+        curvature included (`ctx.start_rate`; none without it). They carry a reaction
+        through the stage, and [`nivpjax.HeldGaps`][] holds them on their gap."""
+        y0 = ctx.y_prev
+        if ctx.start_rate is None:
+            return jnp.zeros(jnp.atleast_1d(self.gap(ctx.t, y0, ctx.args)).shape, bool)
+        Wt, _ = self._maps(ctx.t, y0, ctx.args, dtype)
+        gap0 = jnp.atleast_1d(jnp.asarray(self.gap(ctx.t, y0, ctx.args), dtype))
+        u0 = Wt @ ctx.restrict(y0)
+        a0 = self._normal_acceleration(ctx, y0, ctx.start_rate, dtype)
+        still = jnp.abs(u0) <= self._roundoff_velocity(u0)
+        return self._closed(gap0, u0, y0, ctx.h) & still & (a0 < 0)
 
     def _impacts(self, ctx: ProjectionContext, dtype):
         # Active contacts approaching faster than round-off at the start of the stage.
         _, _, gap0, u_minus, active = self._start(ctx, dtype)
         return gap0, u_minus, active & (u_minus < -self._roundoff_velocity(u_minus))
+
+    def weighed_rows(self, n: int) -> np.ndarray:
+        """Every row with `weighed`: a persistent contact's reaction is then a bounded
+        force that turns with the normal and varies with the load along a closed phase (a
+        bead against a curved wall), which a second-order stage weighs at both ends (only
+        the contacts `pressed` at the point: `ProjectionContext.law`). None otherwise: on
+        a flat contact the holding force stays at the stage's end."""
+        return np.full(n, self.weighed, bool)
 
     def violation(self, ctx: ProjectionContext):
         r"""Penetration at the end of the step of contacts that were open at its start (not
@@ -157,9 +201,9 @@ class UnilateralContact(AbstractProjector):
         point, bouncing at 5e-5 m/s, otherwise takes steps ten times its flights, each
         falling through the floor with an error of round-off)."""
         dtype = ctx.y_iter.dtype
-        Wt, _, gap0, u_minus, _ = self._start(ctx, dtype)
-        gap1, u1 = self._end(ctx, Wt, dtype)
-        a1 = self._end_acceleration(ctx, Wt, dtype)
+        _, _, gap0, u_minus, _ = self._start(ctx, dtype)
+        gap1, u1 = self._end(ctx, dtype)
+        a1 = self._end_acceleration(ctx, dtype)
         is_open = ~self._closed(gap0, u_minus, ctx.y_prev, ctx.h)
         depth0, depth1 = jnp.maximum(-gap0, 0.0), jnp.maximum(-gap1, 0.0)
         tiny = self._roundoff_gap(ctx.y_prev, dtype)
@@ -190,14 +234,14 @@ class UnilateralContact(AbstractProjector):
         the whole step in derivatives (a lift-off time off by the step's part before it:
         d v(T)/d g off by 2.2e-3 relative on a plastic contact at rtol 1e-4)."""
         dtype = ctx.y_iter.dtype
-        Wt0, _, gap0, u0, _ = self._start(ctx, dtype)
-        gap1, u1 = self._end(ctx, Wt0, dtype)
-        a = self._end_acceleration(ctx, Wt0, dtype)
+        _, _, gap0, u0, _ = self._start(ctx, dtype)
+        gap1, u1 = self._end(ctx, dtype)
+        a = self._end_acceleration(ctx, dtype)
         resting0 = self._resting(gap0, u0, ctx.y_prev, ctx.h)
         if ctx.start_rate is None:
             lift_off = jnp.inf
         else:
-            a0 = Wt0 @ ctx.restrict(jnp.asarray(ctx.start_rate, dtype))
+            a0 = self._normal_acceleration(ctx, ctx.y_prev, ctx.start_rate, dtype)
             lift = jnp.where(resting0, secant_crossing(a0, a, ctx.h), jnp.inf)
             lift_off = jnp.min(lift, initial=jnp.inf)
         from_start = jnp.min(jnp.where(resting0, jnp.inf, first_root(gap0, u0, a)), initial=jnp.inf)
@@ -250,8 +294,8 @@ class UnilateralContact(AbstractProjector):
         ends: the acceleration jumps there. A contact that an impact leaves separating
         opens without a jump of the rate."""
         dtype = ctx.y_iter.dtype
-        Wt, _, gap0, u0, _ = self._start(ctx, dtype)
-        gap1, u1 = self._end(ctx, Wt, dtype)
+        _, _, gap0, u0, _ = self._start(ctx, dtype)
+        gap1, u1 = self._end(ctx, dtype)
         resting0 = self._resting(gap0, u0, ctx.y_prev, ctx.h)
         resting1 = self._resting(gap1, u1, ctx.y_iter, ctx.h)
         return jnp.any(resting0 != resting1)
@@ -274,7 +318,10 @@ class UnilateralContact(AbstractProjector):
         return self._project(z, ctx, None)
 
     def _project(self, z, ctx: ProjectionContext, active):
-        Wt, B, _, u_minus, start_active = self._start(ctx, z.dtype)
+        _, _, _, u_minus, start_active = self._start(ctx, z.dtype)
+        if ctx.law:
+            start_active = self.pressed(ctx, z.dtype)
+        Wt, B = self._maps(ctx.t, ctx.y_iter, ctx.args, z.dtype)
         active = start_active if active is None else active
         e = jnp.broadcast_to(resolve(self.restitution, ctx, z.dtype), u_minus.shape)
         m = u_minus.shape[0]

@@ -3,7 +3,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._projector import Bound, UnilateralContact
+from .._projector import Bound, HeldGaps, UnilateralContact
 from .base import AbstractEffect, scene_state
 
 
@@ -18,6 +18,15 @@ class Contact(AbstractEffect):
     - `inverse_mass`: $M^{-1}$ (constant, `(n_dof, n_dof)`), default identity: impulses
       change velocities by $M^{-1} \nabla g\, p$.
 
+    - `curved`: the gap is not affine in the positions (a wall that bends: a bowl, a
+      circular track, a cam; static, default `False`). A closed contact on such a gap
+      drifts off it by $O(h^2)$ per step at velocity level, and its reaction turns with
+      the normal: with `curved=True` persistent contacts are held on their gap at
+      position level ([`nivpjax.HeldGaps`][]) and their reaction is weighed at both ends
+      of the trapezoidal stages, which keeps Bathe's scheme and the trapezoidal rule at
+      second order (backward Euler at first). A flat gap needs neither; the run is
+      the same without.
+
     The contact normals $W^T = \partial g / \partial q$ come from autodiff of `gap`. See
     [`nivpjax.UnilateralContact`][] for the active set, the LCP and event location.
     """
@@ -29,6 +38,7 @@ class Contact(AbstractEffect):
     inverse_mass: object = None
     lookahead: float = 0.5
     name: str = eqx.field(static=True, default="contact")
+    curved: bool = eqx.field(static=True, default=False)
 
     def __init__(
         self,
@@ -39,6 +49,7 @@ class Contact(AbstractEffect):
         inverse_mass=None,
         lookahead=0.5,
         name="contact",
+        curved=False,
     ):
         self.gap = gap
         self.positions = tuple(int(i) for i in np.atleast_1d(positions))
@@ -49,6 +60,7 @@ class Contact(AbstractEffect):
         self.inverse_mass = None if inverse_mass is None else jnp.asarray(inverse_mass)
         self.lookahead = lookahead
         self.name = name
+        self.curved = bool(curved)
 
     def blocks(self, n_states, offset):
         normals = _Normals(self.gap, n_states, self.positions)
@@ -59,8 +71,14 @@ class Contact(AbstractEffect):
             impulse_map=impulse_map,
             restitution=self.restitution,
             lookahead=self.lookahead,
+            weighed=self.curved,
         )
-        return [(self.velocities, projector)]
+        if not self.curved:
+            return [(self.velocities, projector)]
+        return [
+            (self.velocities, projector),
+            (self.positions, HeldGaps(projector, self.velocities)),
+        ]
 
 
 class _Gaps(eqx.Module):
