@@ -241,6 +241,81 @@ def stack_contact_forces(net_force):
 
 
 # ----------------------------------------------------------------------------------------------
+# A ball in a circular bowl (R = 1, plastic): on the wall a pendulum, phi'' = -g sin(phi), pressed
+# by N = phi'^2 + g cos(phi); released where N = 0, a parabola inside, landing with the normal
+# velocity removed, the pendulum again.
+
+
+def _on_wall(phi, om):
+    return np.stack([np.sin(phi), -np.cos(phi), om * np.cos(phi), om * np.sin(phi)], -1)
+
+
+def _bowl_pendulum(phi0, om0, t0, t1, g):
+    # Until t1 or the release (N reaching zero from above): (dense solution, end time).
+    def normal(t, s):
+        return s[1] ** 2 + g * np.cos(s[0])
+
+    normal.terminal, normal.direction = True, -1
+    sol = solve_ivp(
+        lambda t, s: [s[1], -g * np.sin(s[0])],
+        (t0, t1),
+        [phi0, om0],
+        method="DOP853",
+        rtol=1e-13,
+        atol=1e-13,
+        dense_output=True,
+        events=normal,
+    )
+    released = len(sol.t_events[0]) > 0
+    return sol.sol, (sol.t_events[0][0] if released else t1), released
+
+
+def bowl_pieces(v0, g, t_end):
+    """The phases of a ball thrown from the bottom of a unit bowl at speed `v0`, as a list of
+    `(t_start, t_end, state)` with `state(t) -> (q1, q2, v1, v2)`: on the wall, in flight
+    (released where the normal force vanishes), on the wall again after a plastic landing
+    (located by root finding on |q| = 1), and so on until `t_end`."""
+    from scipy.optimize import brentq
+
+    pieces, t0, phi, om = [], 0.0, 0.0, float(v0)
+    down = np.array([0.0, -g])
+    while t0 < t_end:
+        wall, t_r, released = _bowl_pendulum(phi, om, t0, t_end, g)
+        pieces.append((t0, t_r, lambda t, wall=wall: _on_wall(*wall(t))))
+        if not released:
+            break
+        q_r, v_r = _on_wall(*wall(t_r))[:2], _on_wall(*wall(t_r))[2:]
+
+        def flight(t, q_r=q_r, v_r=v_r, t_r=t_r):
+            s = t - t_r
+            return np.concatenate([q_r + v_r * s + 0.5 * down * s * s, v_r + down * s])
+
+        inside = lambda t: 1.0 - np.sum(flight(t)[:2] ** 2)  # noqa: E731
+        grid = t_r + np.linspace(1e-9, 2 * (abs(v0) + 1) / max(g, 1e-12), 20001)
+        k = int(np.argmax([inside(t) < 0 for t in grid]))
+        t_l = brentq(inside, grid[k - 1], grid[k], xtol=1e-15)
+        pieces.append((t_r, min(t_l, t_end), flight))
+        q, v = flight(t_l)[:2], flight(t_l)[2:]
+        v = v - (v @ q) * q  # plastic: the normal velocity removed
+        t0, phi = t_l, np.arctan2(q[0], -q[1])
+        om = v @ np.array([np.cos(phi), np.sin(phi)])
+    return pieces
+
+
+def bowl_state(t, v0, g, t_end=None):
+    """The state of the ball of `bowl_pieces` at the times `t` (an array)."""
+    t = np.atleast_1d(np.asarray(t, float))
+    pieces = bowl_pieces(v0, g, float(t.max()) if t_end is None else t_end)
+    out = np.empty((t.size, 4))
+    for i, ti in enumerate(t):
+        for a, b, state in pieces:
+            if ti <= b or (a, b, state) == pieces[-1]:
+                out[i] = state(ti)
+                break
+    return out
+
+
+# ----------------------------------------------------------------------------------------------
 # Example utilities.
 
 

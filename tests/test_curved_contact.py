@@ -1,14 +1,17 @@
 """Contacts held closed on a curved gap (issue 33): `nj.scenes.ball_in_bowl`, a point inside
 a circular wall of radius R = 1, g(q) = R - |q| >= 0, plastic (e = 0).
 
-- The bead: no gravity, q(0) = (1, 0), v(0) = (0, 1): uniform motion on the circle, the
-  wall pushing with v^2/R = 1 throughout (exact solution in closed form).
+- The bead: no gravity, q(0) = (0, -1), v(0) = (1, 0): uniform motion on the circle, the
+  wall pushing with v^2/R = 1 throughout.
 - The bowl: g = 9.81, q(0) = (0, -1), v(0) = (1, 0): a pendulum held by a unilateral wall,
   about 18 degrees, never leaving it (reference: the pendulum by DOP853 at rtol 1e-13),
   pressed by N = R phi'^2 + g cos(phi).
 - Thrown: v(0) = (6, 0): the ball leaves the wall where N reaches zero, flies a parabola
-  and lands again (an event-driven reference: the pendulum to N = 0, the parabola to
-  |q| = R, the plastic impact, the pendulum again).
+  and lands again.
+
+References: `bowl_state` in `examples/_references_mechanics.py`, event-driven (the
+pendulum by DOP853 at rtol 1e-13 to N = 0, the parabola to |q| = R by root finding, the
+plastic impact, the pendulum again).
 
 Before: every stepper stopped with `max_steps` adaptively (the start's normals read the
 body sliding along the wall as approaching it: an impact per step), and fixed steps gave
@@ -16,22 +19,26 @@ order 1.0 (the reaction applied whole at the stage's end along a turning normal)
 """
 
 import functools
+import sys
+from pathlib import Path
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from scipy.integrate import solve_ivp
-from scipy.optimize import brentq
 
 import nivpjax as nj
+
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "examples"))
+from _references_mechanics import bowl_state  # noqa: E402
 
 
 SCENE, _, ARGS = nj.scenes.ball_in_bowl()
 G = 9.81
 STEPPERS = {"bathe": nj.Bathe, "tr": nj.Trapezoidal, "be": nj.BackwardEuler}
 CASES = {  # (x0, g)
-    "bead": ((1.0, 0.0, 0.0, 1.0), 0.0),
+    "bead": ((0.0, -1.0, 1.0, 0.0), 0.0),
     "bowl": ((0.0, -1.0, 1.0, 0.0), G),
     "thrown": ((0.0, -1.0, 6.0, 0.0), G),
 }
@@ -41,79 +48,9 @@ def _args(g):
     return dict(ARGS, g=jnp.asarray(g))
 
 
-def _on_wall(phi, om):
-    return np.stack([np.sin(phi), -np.cos(phi), om * np.cos(phi), om * np.sin(phi)], -1)
-
-
-def _pendulum(phi0, om0, t0, t1, g, release):
-    # phi'' = -g sin(phi) on the wall (R = 1), until N = phi'^2 + g cos(phi) reaches 0.
-    def normal(t, s):
-        return s[1] ** 2 + g * np.cos(s[0])
-
-    normal.terminal, normal.direction = True, -1
-    sol = solve_ivp(
-        lambda t, s: [s[1], -g * np.sin(s[0])],
-        (t0, t1),
-        [phi0, om0],
-        method="DOP853",
-        rtol=1e-13,
-        atol=1e-13,
-        dense_output=True,
-        events=normal if release else None,
-    )
-    end = sol.t_events[0][0] if release and len(sol.t_events[0]) else t1
-    return sol.sol, end
-
-
-@functools.cache
-def _thrown_reference(v0=6.0, T=2.0):
-    """`(state(t), t_release, t_landing)` of the thrown ball (plastic landing)."""
-    wall1, t_r = _pendulum(0.0, v0, 0.0, T, G, release=True)
-    q_r, v_r = _on_wall(*wall1(t_r))[:2], _on_wall(*wall1(t_r))[2:]
-    down = np.array([0.0, -G])
-
-    def flight(t):
-        s = t - t_r
-        return q_r + v_r * s + 0.5 * down * s * s, v_r + down * s
-
-    inside = lambda t: 1.0 - np.sum(flight(t)[0] ** 2)  # noqa: E731
-    grid = t_r + np.linspace(1e-6, 1.0, 10001)
-    k = int(np.argmax([inside(t) < 0 for t in grid]))
-    t_l = brentq(inside, grid[k - 1], grid[k], xtol=1e-15)
-    q_l, v_l = flight(t_l)
-    v_plus = v_l - (v_l @ q_l) * q_l  # plastic: the normal velocity removed
-    phi_l = np.arctan2(q_l[0], -q_l[1])
-    wall2, _ = _pendulum(phi_l, v_plus @ np.array([np.cos(phi_l), np.sin(phi_l)]), t_l, T, G, False)
-
-    def state(ts):
-        out = []
-        for t in np.atleast_1d(ts):
-            if t <= t_r:
-                out.append(_on_wall(*wall1(t)))
-            elif t < t_l:
-                out.append(np.concatenate(flight(t)))
-            else:
-                out.append(_on_wall(*wall2(t)))
-        return np.array(out)
-
-    return state, t_r, t_l
-
-
 def _exact(case, ts):
-    if case == "bead":
-        return _on_wall(np.pi / 2 + ts, np.ones_like(ts))  # from (1, 0), anticlockwise
-    if case == "bowl":
-        sol = solve_ivp(
-            lambda t, s: [s[1], -G * np.sin(s[0])],
-            (0.0, ts[-1]),
-            [0.0, 1.0],
-            t_eval=ts,
-            method="DOP853",
-            rtol=1e-13,
-            atol=1e-13,
-        )
-        return _on_wall(*sol.y)
-    return _thrown_reference()[0](ts)
+    x0, g = CASES[case]
+    return bowl_state(ts, x0[2], g)
 
 
 @functools.cache
@@ -188,7 +125,7 @@ def test_held_on_the_wall_with_its_reaction(stepper):
     exact = _exact("bowl", ts)
     phi = np.arctan2(exact[:, 0], -exact[:, 1])
     om = exact[:, 2] * np.cos(phi) + exact[:, 3] * np.sin(phi)
-    force = om**2 + G * np.cos(phi)
+    force = om**2 + G * np.cos(phi)  # N = R phi'^2 + g cos(phi), R = 1
     # The velocity rows' reaction is -N q / |q|: N = -r . q.
     reported = -np.sum(mult[1 : len(ts), 2:] * q[1:], axis=1)
     expected = force[1:] if stepper == "bathe" else 0.5 * (force[1:] + force[:-1])
