@@ -388,3 +388,68 @@ def test_singular_newton_system_falls_back_to_the_projection_step():
     assert sol.result == nj.RESULTS.successful
     assert int(sol.iterations) == 1
     assert float(sol.value[0]) == 1.0
+
+
+# --- The VI method's step rules and the Newton watchdog, each against the stage's exact
+# solution: a rule dropped leaves the solver failing or returning a point off it.
+def test_vi_step_grows_from_a_small_initial_step():
+    """alpha grows after an accepted move with L < nu/2: from alpha0 = 1e-3 the relay stage
+    (sliding and slipping) converges in tens of iterations. A fixed alpha = 1e-3 contracts
+    by about 1 - alpha per iteration: still 1e-2 off after the 200 allowed."""
+    solver = nj.FixedPointVI(rtol=1e-10, atol=1e-12, alpha0=1e-3, max_steps=200)
+    for xn, expected in ((0.05, (0.0, 0.8)), (0.5, (0.43, 1.0))):
+        sol = relay_step_jit(solver, xn, 0.3, 0.1)
+        assert sol.result == nj.RESULTS.successful, sol.iterations
+        np.testing.assert_allclose(sol.value, expected, rtol=0, atol=1e-9)
+
+
+def test_vi_extragradient_only_at_a_safe_step():
+    """A skew-coupled stage R(y) = A y - b, A = [[0.1, 10], [-10, 0]], with w in [-1, 1]:
+    monotone, plain projection cycles (no contraction), and the extragradient step is
+    safe only for alpha |A| <= nu. From alpha0 = 1 the guard rejects and shrinks until
+    then, and the iteration converges to the exact solution (w interior: A y = b). Taking
+    the extragradient step at alpha = 1 regardless diverges to the box's edge (measured:
+    x = 10.75, w = 1 after 500 iterations)."""
+    A, b = jnp.array([[0.1, 10.0], [-10.0, 0.0]]), jnp.array([1.0, 0.5])
+    solver = nj.FixedPointVI(rtol=1e-10, atol=1e-12, max_steps=500)
+    sol = solver.solve(lambda y: A @ y - b, RELAY_P, 1.0, jnp.zeros(2))
+    assert sol.result == nj.RESULTS.successful, sol.iterations
+    np.testing.assert_allclose(sol.value, np.linalg.solve(A, b), rtol=1e-9)
+
+
+def test_vi_returns_the_projection_step_that_solves_explicit_rows():
+    """A ball in free flight, q = q0 + h v, v = v0 - h g, at a loose tolerance whose
+    stopping test passes one iteration before q has caught up with v (h^2 g = 1e-5 below
+    rtol |q| = 1e-4): ending with the projection step returns both rows solved to
+    round-off; returning the iterate leaves q off by h^2 g (the tolerance's size, what
+    sustains micro-bounces of a ball at rest)."""
+    q0, v0, h = 1.0, -1.0, 1e-3
+    sol = contact_step(nj.FixedPointVI(rtol=1e-4, atol=1e-10), jnp.array(q0), jnp.array(v0), 0.5, h)
+    q, v = (float(c) for c in sol.value)
+    assert sol.result == nj.RESULTS.successful
+    assert abs(v - (v0 - h * G)) <= 1e-15 and abs(q - (q0 + h * v)) <= 1e-15, (q, v)
+
+
+def test_newton_watchdog_leaves_a_false_minimum_of_the_merit():
+    """A stage R(y) = A y + 0.1 y^3 - b, y1 in [-1, 1], y2 >= 0, whose merit |G|^2 / 2 has a
+    local minimum that is no solution in the basin of y = 0: a monotone line search from
+    the first iteration stalls there (merit 0.83; max_steps reached); the default solver's
+    full Newton steps first (the watchdog) let the residual grow (to 52) and then converge.
+    The solution is checked in numpy: R_0 = 0, y1 = clip(y1 - R_1), y2 = max(0, y2 - R_2)."""
+    A = np.array([[-0.8, -1.2, -0.1], [0.3, 1.7, -0.3], [1.0, -0.3, 0.3]])
+    b = np.array([0.9, 0.2, 0.6])
+
+    def residual(y):
+        return jnp.asarray(A) @ y + 0.1 * y**3 - jnp.asarray(b)
+
+    solve = jax.jit(
+        lambda s: s.solve(residual, _BOX_AND_ORTHANT, 1.0, jnp.zeros(3)), static_argnums=0
+    )
+    stalled = solve(nj.SemismoothNewton(full_steps=0))
+    assert stalled.result == nj.RESULTS.nonlinear_max_steps_reached
+    sol = solve(nj.SemismoothNewton())
+    assert sol.result == nj.RESULTS.successful
+    y = np.asarray(sol.value)
+    R = A @ y + 0.1 * y**3 - b
+    natural = y - np.array([y[0] - R[0], np.clip(y[1] - R[1], -1, 1), max(0.0, y[2] - R[2])])
+    assert np.max(np.abs(natural)) <= 1e-7, (y, natural)
