@@ -1,5 +1,6 @@
 """Semismooth Newton and the VI method on single implicit steps with exact solutions."""
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -453,3 +454,36 @@ def test_newton_watchdog_leaves_a_false_minimum_of_the_merit():
     R = A @ y + 0.1 * y**3 - b
     natural = y - np.array([y[0] - R[0], np.clip(y[1] - R[1], -1, 1), max(0.0, y[2] - R[2])])
     assert np.max(np.abs(natural)) <= 1e-7, (y, natural)
+
+
+@pytest.mark.parametrize("name", SOLVERS)
+def test_a_successful_value_passes_the_stopping_test(name):
+    """`successful` means the returned value passes the solver's own stopping test,
+    max |G| / (atol + rtol |y|) <= 1 with G(y) = y - P(y - rho R(y)). On a stiff free row
+    (a backward Euler stage of y' = -k y^3, rho = h, k h = 1e2 and 1e4) the iterate does;
+    the Picard point y - rho R(y) has G amplified by |1 - rho R'| = 3 k h y^2 (measured 8
+    to 42 times the tolerance with the VI method): free components keep the iterate."""
+    from nivpjax._nonlinear.base import scaled_error
+
+    rtol, atol = 1e-4, 1e-8
+    solver = eqx.tree_at(lambda s: (s.rtol, s.atol), SOLVERS[name], (rtol, atol))
+    for kh in (1e2, 1e4):
+        residual = lambda y, kh=kh: (y - 1.0) + kh * y**3  # noqa: E731
+        sol = solver.solve(residual, lambda z, y, rho: z, 1.0, jnp.ones(1))
+        assert sol.result == nj.RESULTS.successful
+        G = residual(sol.value)  # rho = 1, P the identity
+        assert float(scaled_error(G, sol.value, rtol, atol)) <= 1.0, (kh, sol.value, G)
+
+
+def test_vi_moves_from_its_initial_guess_on_a_tiny_step():
+    """A stage whose whole update lies below the tolerance (y' = 1 over h = 1e-10 from
+    y0 = 1, rtol 1e-8): a solve that stopped at its initial guess would return the step's
+    start and freeze the state (see `test_tiny_steps_do_not_freeze_the_state`). With
+    alpha0 = 1/2 the VI method's first predictor moves half the update, within the
+    tolerance: it must still take that move, and ends within half the update of the
+    exact 1 + 1e-10, on its side of the start."""
+    h = 1e-10
+    solver = nj.FixedPointVI(alpha0=0.5)
+    sol = solver.solve(lambda y: (y - 1.0) / h - 1.0, lambda z, y, rho: z, h, jnp.ones(1))
+    moved = float(sol.value[0]) - 1.0
+    assert 0.5 * h <= moved <= 1.5 * h, moved
