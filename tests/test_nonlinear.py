@@ -487,3 +487,50 @@ def test_vi_moves_from_its_initial_guess_on_a_tiny_step():
     sol = solver.solve(lambda y: (y - 1.0) / h - 1.0, lambda z, y, rho: z, h, jnp.ones(1))
     moved = float(sol.value[0]) - 1.0
     assert 0.5 * h <= moved <= 1.5 * h, moved
+
+
+def test_vi_iterations_do_not_grow_as_the_step_shrinks():
+    """The stage scales multiplier rows by rho = tau / h (they enter the state with weight
+    h) and equation rows by rho = tau (O(1) sensitivity), so that the map the VI method
+    iterates does not degrade as h shrinks. One backward Euler step of a relay
+    (x' = -w + 0.3 from x = 0.01: sliding at h = 0.1, w = 0.3 + x0 / h; slipping below,
+    w = 1) and of a conducting diode behind a resistor (x' = cos t - x - i, i = (cos t - x)
+    / 2, from x = 0.2: x1 = (x0 + h cos(h) / 2) / (1 + h / 2)), at h = 1e-1 to 1e-4: the
+    VI method converges in at most 40 iterations at every h (measured 10 to 33), to the
+    exact step. Measured with rho = tau on the relay's rows: 73 to 141 iterations; with
+    tau / h on the diode's: no convergence in 500 below h = 0.1."""
+    from nivpjax._model import Model
+
+    def relay_exact(h):
+        return [0.0, 0.3 + 0.01 / h] if h > 0.01 / 0.7 else [0.01 - 0.7 * h, 1.0]
+
+    def diode_exact(h):
+        x1 = (0.2 + 0.5 * h * np.cos(h)) / (1 + 0.5 * h)
+        return [x1, 0.5 * (np.cos(h) - x1)]
+
+    relay = nj.Relay("w", lambda t, x, a: x)
+    diode = nj.Diode("i", lambda t, x, i, a: jnp.cos(t) - x[:1] - 2.0 * i)
+    cases = [
+        (nj.Scene(lambda t, x, a, m: -m["w"] + 0.3, 1, (relay,)), [0.01, 0.3], relay_exact),
+        (
+            nj.Scene(lambda t, x, a, m: jnp.cos(t) - x - m["i"], 1, (diode,)),
+            [0.2, 0.1],
+            diode_exact,
+        ),
+    ]
+    for scene, y0, exact in cases:
+        mass = scene.full_mass_matrix
+        model = Model.build(
+            scene.vector_field,
+            scene.projector,
+            mass,
+            np.asarray(mass.diagonal() == 0),
+            equation_rows=scene.equation_rows,
+        )
+        stepper = nj.BackwardEuler(nj.FixedPointVI())
+        step = jax.jit(lambda h: stepper.step(model, 0.0, h, jnp.array(y0), None))
+        for h in (1e-1, 1e-2, 1e-3, 1e-4):
+            out = step(jnp.asarray(h))
+            assert out.stats.nonlinear_result == nj.RESULTS.successful, (y0, h)
+            assert int(out.stats.iterations) <= 40, (y0, h, out.stats.iterations)
+            np.testing.assert_allclose(out.y1, exact(h), rtol=1e-6, atol=1e-9)
