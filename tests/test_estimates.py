@@ -228,3 +228,29 @@ def test_theta_estimate_charges_a_switch_inside_the_step():
         out = step(jnp.array([x0, -1.0]))
         true = float(out.y1[0]) - (x0 + h + 2 * fraction * h)
         assert abs(float(out.y_error[0])) >= abs(true), (fraction, out.y_error, true)
+
+
+def test_theta_estimate_charges_a_face_reached_inside_the_step():
+    # x' = v, v' = 3 with v held in [-1, 1] by a box on the differential row (a normal
+    # cone: no multiplier, no reaction in f), from v0 = 1 - 3 tau: v reaches the face at
+    # tau and stays, so x(h) = v0 tau + 3 tau^2 / 2 + (h - tau). The trapezoidal rule
+    # averages v0 and 1 over the whole step: x off by (h - tau)(v0 - 1) / 2, which the
+    # estimate of its smooth terms cannot see (the rates at both ends are the face's);
+    # the switch's kink charge must cover it at every tau (with the kink's factor h - tau
+    # taken as tau, the estimate was exactly 0 against a true 3.75e-3 at tau = h / 2).
+    a, h = 3.0, 0.1
+    model = Model.build(
+        lambda t, y, args: jnp.stack([y[1], a + 0 * y[1]]),
+        nj.BlockProjector([([1], nj.Box(-1.0, 1.0))]),
+        None,
+        np.zeros(2, bool),
+    )
+    step = jax.jit(lambda y0: nj.Trapezoidal(TIGHT).step(model, jnp.asarray(0.0), h, y0, None))
+    for fraction in (0.1, 0.3, 0.5, 0.7, 0.9):
+        tau = fraction * h
+        v0 = 1.0 - a * tau
+        out = step(jnp.array([0.0, v0]))
+        assert float(out.y1[1]) == 1.0
+        true = float(out.y1[0]) - (v0 * tau + a * tau**2 / 2 + (h - tau))
+        np.testing.assert_allclose(true, 0.5 * (h - tau) * (v0 - 1.0), rtol=1e-9)
+        assert abs(float(out.y_error[0])) >= abs(true), (fraction, out.y_error, true)
