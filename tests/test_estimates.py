@@ -262,14 +262,18 @@ def test_theta_estimate_is_zero_inside_a_sliding_mode():
     # mode is exact in the state; its estimate must be too: the multiplier's secant rate
     # makes the flow's derivative -w' + d' vanish, as the true one does (a multiplier taken
     # as constant charged h^2 d' / 2 = 2.5e-3 at h = 0.1, shrinking steps for no error).
+    # Backward Euler's start rate likewise: the smaller of f1 - f0 and f1 - f0_end, where
+    # f0_end applies the end's equivalent control at t0 (off by h d': an estimate of
+    # h^2 d' / 4 = 2.5e-3 at h = 0.1 with f0_end alone).
     scene = nj.Scene(
         lambda t, x, a, m: -m["w"] + 0.3 + 0.5 * t, 1, (nj.Relay("w", lambda t, x, a: x),)
     )
     model = Model.build(
         scene.vector_field, scene.projector, scene.full_mass_matrix, np.array([False, True])
     )
-    step = jax.jit(lambda t0, h, y0: nj.Trapezoidal(TIGHT).step(model, t0, h, y0, None))
-    for t0, h in ((0.0, 0.1), (0.7, 0.02)):
-        out = step(jnp.asarray(t0), jnp.asarray(h), jnp.array([0.0, 0.3 + 0.5 * t0]))
-        np.testing.assert_allclose(out.y1, [0.0, 0.3 + 0.5 * (t0 + h)], atol=1e-12)
-        assert np.max(np.abs(np.asarray(out.y_error))) <= 1e-12, (t0, h, out.y_error)
+    for stepper in (nj.Trapezoidal(TIGHT), nj.BackwardEuler(TIGHT)):
+        step = jax.jit(lambda t0, h, y0, s=stepper: s.step(model, t0, h, y0, None))
+        for t0, h in ((0.0, 0.1), (0.7, 0.02)):
+            out = step(jnp.asarray(t0), jnp.asarray(h), jnp.array([0.0, 0.3 + 0.5 * t0]))
+            np.testing.assert_allclose(out.y1, [0.0, 0.3 + 0.5 * (t0 + h)], atol=1e-12)
+            assert np.max(np.abs(np.asarray(out.y_error))) <= 1e-12, (stepper, t0, out.y_error)
