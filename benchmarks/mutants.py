@@ -691,14 +691,18 @@ MUTANTS = [
         (TE + "test_estimate_tracks_local_error",),
     ),
     Mutant(
-        "bathe_reaction_constant",
+        "bathe_reaction_at_end_only",
         "steppers",
         S + "bathe.py",
-        "r0 = (2 * r_a - g * r_b) / (2 - g)",
-        "r0 = r_a",
-        "the comment: reactions linear in time matching the stage averages (a body stuck "
-        "under a slowly varying load has exactly zero estimate)",
+        "smooth = bathe_error(g, h, f0, f_mid, f1)",
+        "smooth = bathe_error(g, h, f0, f_mid, f1 + model.reaction(multipliers))",
+        "Bathe's docstring: the stages' reactions, linear in time, drop out of the estimate "
+        "(a body held under a load linear in time has exactly zero estimate); replaces "
+        "bathe_reaction_constant, EQUIVALENT (any r0 with r_mid on the line to r_b is linear "
+        "in time, which the second divided difference annihilates: the reaction lines were "
+        "dead and are removed)",
         (
+            TE + "test_bathe_estimate_is_zero_for_a_body_held_under_a_varying_load",
             "tests/test_hard_cases.py::test_stick_slip_under_slowly_growing_load[bathe]",
             "tests/test_friction_order.py::test_second_order_at_fixed_steps[disk-bathe]",
             "tests/test_hard_cases.py::test_ball_resting_contact_carries_weight[bathe]",
