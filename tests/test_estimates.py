@@ -298,3 +298,22 @@ def test_bathe_estimate_is_zero_for_a_body_held_under_a_varying_load():
         out = step(jnp.asarray(t0), jnp.asarray(h))
         np.testing.assert_allclose(out.y1, [h, 1.0], rtol=1e-13)
         assert np.max(np.abs(np.asarray(out.y_error))) <= 1e-13, (t0, h, out.y_error)
+
+
+def test_bathe_estimate_charges_a_switch_inside_its_first_stage():
+    # x' = -w + 2, w in Sign(x), from x0 = -3 tau: x' = 3 until x = 0 at tau, 1 after, so
+    # x(h) = h - tau. With tau inside Bathe's first (trapezoidal) stage, the stage changes
+    # face and the second restarts as backward Euler; the estimate of the two sub-steps
+    # must charge the rate jump inside the first, gamma h (f_mid - f0) / 2, and cover the
+    # true error at every tau (without it: an estimate of 0 against a true 0.04 at
+    # tau = 0.05 h, both stages ending on the same branch).
+    scene = nj.Scene(lambda t, x, a, m: -m["w"] + 2.0, 1, (nj.Relay("w", lambda t, x, a: x),))
+    model = Model.build(
+        scene.vector_field, scene.projector, scene.full_mass_matrix, np.array([False, True])
+    )
+    h = 0.1
+    step = jax.jit(lambda y0: nj.Bathe(solver=TIGHT).step(model, jnp.asarray(0.0), h, y0, None))
+    for fraction in (0.05, 0.15, 0.25, 0.35, 0.45):
+        out = step(jnp.array([-3.0 * fraction * h, -1.0]))
+        true = float(out.y1[0]) - (h - fraction * h)
+        assert abs(float(out.y_error[0])) >= abs(true), (fraction, out.y_error, true)
