@@ -252,3 +252,21 @@ def test_pid_first_step_is_hairer_wanners_guess_capped_at_a_tenth_of_the_interva
         np.testing.assert_allclose(float(h), reference(f0, t1), rtol=1e-12)
     # The first case is the cap's: the guess alone would be 10, ten times the interval.
     assert reference(cases[0][0], 1e9) > 1.0
+
+
+def test_a_rejected_attempt_is_retried_shorter():
+    # After a rejection, an attempt that crossed the predicted event before its last
+    # EVENT_SKIP is retried up to just before it, whatever the error-controlled proposal
+    # (that judged the whole attempt, crossing included); one whose event lies in its
+    # last EVENT_SKIP (it ended on the surface, up to the solver's tolerance) gets the
+    # error-controlled proposal: retrying up to the event would repeat the same attempt,
+    # rejected for the same error (measured: 7936 rejections of one step).
+    from nivpjax._controller.events import EVENT_SKIP, land_before_event
+
+    margin, proposal = 1e-2, jnp.asarray(0.5)  # the attempt has h = 1 (from t0 = 0)
+    info = _unit_step_info(jnp.array([1.0]), 3)
+    cases = [(0.3, 0.3 * (1 - margin)), (0.8, 0.8 * (1 - margin)), (1 - 0.5 * EVENT_SKIP, 0.5)]
+    for event, expected in cases:
+        at = eqx.tree_at(lambda i: i.next_event, info, jnp.asarray(event))
+        h = land_before_event(at, jnp.asarray(False), jnp.asarray(True), proposal, margin)
+        np.testing.assert_allclose(float(h), expected, rtol=1e-14)
