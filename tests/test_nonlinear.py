@@ -434,8 +434,8 @@ def test_vi_returns_the_projection_step_that_solves_explicit_rows():
 def test_newton_watchdog_leaves_a_false_minimum_of_the_merit():
     """A stage R(y) = A y + 0.1 y^3 - b, y1 in [-1, 1], y2 >= 0, whose merit |G|^2 / 2 has a
     local minimum that is no solution in the basin of y = 0: a monotone line search from
-    the first iteration stalls there (merit 0.83; max_steps reached); the default solver's
-    full Newton steps first (the watchdog) let the residual grow (to 52) and then converge.
+    the first iteration stalls there (max |G| stays at 0.83; max_steps reached); the default
+    solver's full Newton steps first (the watchdog) let |G| grow (to 52) and then converge.
     The solution is checked in numpy: R_0 = 0, y1 = clip(y1 - R_1), y2 = max(0, y2 - R_2)."""
     A = np.array([[-0.8, -1.2, -0.1], [0.3, 1.7, -0.3], [1.0, -0.3, 0.3]])
     b = np.array([0.9, 0.2, 0.6])
