@@ -1241,7 +1241,10 @@ MUTANTS = [
         "return out",
         "EventLocated._start_branch's docstring: a stage crossing a kink late takes the start "
         "branch's derivative (measured: dv/dR_L 6% off just after a diode turns off)",
-        (TS + "test_rectifier_derivative_after_a_step_over_the_turn_off",),
+        (
+            TS + "test_rectifier_converges_to_exact_derivative",
+            TS + "test_rectifier_derivative_after_a_step_over_the_turn_off",
+        ),
     ),
     Mutant(
         "locate_selections_off",
@@ -1267,6 +1270,7 @@ MUTANTS = [
         "CoulombFriction.violation's docstring: a step ending stuck under a force beyond the "
         "bound is a missed breakaway (the trapezoidal rule and Bathe check an average force)",
         (
+            TP + "test_coulomb_violation_sees_a_missed_breakaway",
             "tests/test_scenes_mechanics.py::test_slider_stick_slip",
             "tests/test_hard_cases.py::test_stick_slip_under_slowly_growing_load[bathe]",
         ),
