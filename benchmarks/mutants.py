@@ -1229,6 +1229,7 @@ MUTANTS = [
         "EventLocated.violation's docstring: a crossing and back inside a step counts "
         "(measured: a diode bridge stepped over a conduction pulse, 9% off, successful)",
         (
+            TEV + "test_a_step_does_not_jump_over_a_conduction_pulse",
             TEV + "test_hermite_excursion_measures_a_crossing_and_back",
             "tests/test_scenes_switching.py::test_rectifier_conduction_intervals",
         ),
