@@ -302,3 +302,34 @@ def test_bathe_step_charges_an_impact_at_its_second_stage():
         true = float(out.y1[1]) - v_exact
         assert abs(true) > 0.04, true
         np.testing.assert_allclose(float(out.y_error[1]), true, rtol=1e-2)
+
+
+def test_a_late_kink_takes_the_start_branch_derivative():
+    """A stage whose diode turned off in its second half (the surface s = x, the voltage
+    without current, from 1 to -0.1): the flow followed the conducting branch for most of
+    the stage, so the derivative the implicit function theorem uses is the start branch's,
+    the orthant's interior (dw/dz = 1), while the value is the end's projection (w = 0).
+    A switch in the first half (from 0.1 to -1) keeps the end branch's element (0)."""
+    import jax
+    import jax.numpy as jnp
+
+    surface = nj.EventLocated(nj.NonNegative(), lambda t, y, a: y[:1])
+    projector = nj.BlockProjector([([1], surface)])
+    z = jnp.array([-0.1, -0.3])
+
+    def derivative(x0, x1):
+        ctx = nj.ProjectionContext(
+            t=jnp.asarray(0.1),
+            h=jnp.asarray(0.1),
+            y_prev=jnp.array([x0, 0.5]),
+            y_iter=jnp.array([x1, 0.0]),
+            rho=jnp.ones(2),
+            args=None,
+            tangent=True,
+        )
+        out, dout = jax.jvp(lambda z: projector(z, ctx), (z,), (jnp.array([0.0, 1.0]),))
+        assert float(out[1]) == 0.0
+        return float(dout[1])
+
+    assert derivative(1.0, -0.1) == 1.0
+    assert derivative(0.1, -1.0) == 0.0
