@@ -44,7 +44,7 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
-from .mutants import MUTANTS, Mutant
+from .mutants import EQUIVALENT, MUTANTS, Mutant
 
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -159,6 +159,7 @@ def run_mutant(mutant: Mutant, full: bool, timeout: float, log, snapshot: Path) 
         tests=" ".join(mutant.tests) if not full else "full suite",
         outcome=outcome(rc),
         seconds=round(seconds, 1),
+        run=_today(),
         tail=tail,
     )
     log(f"{mutant.name:<32} {row['outcome']:<18} {seconds:7.1f} s  {tail[-160:]}")
@@ -191,7 +192,11 @@ def baselines(mutants, full: bool, timeout: float, log, snapshot: Path) -> dict:
     return out
 
 
-FIELDS = ["name", "module", "reason", "tests", "outcome", "seconds"]
+def _today() -> str:
+    return time.strftime("%Y-%m-%d", time.gmtime())
+
+
+FIELDS = ["name", "module", "reason", "tests", "outcome", "seconds", "run"]
 BASELINE = "(baseline) "
 
 
@@ -217,6 +222,7 @@ def merge(rows, base, stem: Path):
     ]
     for r in merged:  # the reasons as the list now states them (e.g. "equivalent: ...")
         r["reason"] = current[r["name"]].reason
+        r.setdefault("run", "")
     return merged + list(new.values()), base
 
 
@@ -234,6 +240,7 @@ def write(rows, stem: Path, full: bool, base) -> None:
                 tests="",
                 outcome="passed" if ok else "FAILED",
                 seconds=round(s, 1),
+                run="",
             )
             for area, (ok, s, _) in base.items()
         )
@@ -254,21 +261,26 @@ def write(rows, stem: Path, full: bool, base) -> None:
         f"**Score: {score}.**"
         + (" Survived: " + ", ".join(f"`{r['name']}`" for r in survived) + "." if survived else ""),
         "",
+        "Equivalent mutants, proven so and excluded from the list and the score: "
+        + ", ".join(f"`{n}`" for n in EQUIVALENT)
+        + " (reasons in `benchmarks/mutants.py`, `EQUIVALENT`). Column *run*: the date of "
+        "each row's latest run (`--only` reruns replace their rows and keep the others').",
+        "",
         "Baselines (the unmutated copy, each area's tests): "
         + ", ".join(
             f"{a} {'passed' if ok else 'FAILED'} ({s:.0f} s)" for a, (ok, s, _) in base.items()
         )
         + ".",
         "",
-        "| mutant | module | reason | tests run | outcome | s |",
-        "|---|---|---|---|---|---:|",
+        "| mutant | module | reason | tests run | outcome | s | run |",
+        "|---|---|---|---|---|---:|---|",
     ]
     for r in rows:
         tests = "<br>".join(f"`{t}`" for t in r["tests"].split()) if not full else "suite"
         reason = r["reason"].replace("|", "\\|")
         lines.append(
             f"| `{r['name']}` | `{r['module'].removeprefix('nivpjax/')}` | {reason} | "
-            f"{tests} | {r['outcome']} | {r['seconds']} |"
+            f"{tests} | {r['outcome']} | {r['seconds']} | {r.get('run') or ''} |"
         )
     stem.with_suffix(".md").write_text("\n".join(lines) + "\n")
     if stem == RESULTS / "mutation" and DOCS_PAGE.is_file():
@@ -360,6 +372,7 @@ def main(argv=None):
                 tests=" ".join(m.tests),
                 outcome="baseline failed",
                 seconds=0.0,
+                run=_today(),
             )
         row = run_mutant(m, a.full, a.timeout, log, snapshot)
         with lock:  # the table so far, so that an interrupted run leaves its results

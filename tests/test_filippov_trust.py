@@ -180,3 +180,31 @@ def test_second_order_sliding_is_not_checked_as_first_order(name):
     assert sol.result == nj.RESULTS.successful
     x = np.asarray(sol.y_final)
     assert abs(x[1] + 3.0 * x[0]) <= 1e-2  # on the sliding surface at the end
+
+
+def test_held_step_sees_an_excursion_of_the_equivalent_control_between_its_ends():
+    # x' = -w + d(t), w in Sign(x), sliding (x = 0, w = d inside [-1, 1]) at both ends of
+    # a step of size 1, while d = 0.5 + exp(-((t - 0.275) / 0.1)^2) exceeds 1 on
+    # (0.19, 0.36) only: the phase ends inside the step and comes back. The samples of the
+    # held step (k / 9) must see an excursion this long (0.17 of the step, more than 1/9):
+    # the drift h (d(c) - 1) at the worst sample, c = 2/9, and a retry from the last sample
+    # before it, 1/9. The same step far from the bump holds throughout: nothing.
+    from nivpjax._model import Model
+
+    def d(t):
+        return 0.5 + jnp.exp(-(((t - 0.275) / 0.1) ** 2))
+
+    scene = nj.Scene(lambda t, x, a, m: -m["w"] + d(t), 1, (nj.Relay("w", lambda t, x, a: x),))
+    model = Model.build(
+        scene.vector_field, scene.projector, scene.full_mass_matrix, np.array([False, True])
+    )
+    held_exit = jax.jit(
+        lambda t0: model.held_exit(
+            t0 + 1.0, jnp.asarray(1.0), jnp.stack([0.0, d(t0)]), jnp.stack([0.0, d(t0 + 1)]), None
+        )
+    )
+    violation, time = held_exit(jnp.asarray(0.0))
+    np.testing.assert_allclose(violation, d(2 / 9) - 1.0, rtol=1e-2)
+    np.testing.assert_allclose(time, 1 / 9, rtol=1e-12)
+    violation, time = held_exit(jnp.asarray(2.0))
+    assert float(violation) == 0.0 and float(time) == np.inf

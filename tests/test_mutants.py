@@ -40,3 +40,11 @@ def test_check_rejects_ambiguous_and_missing_text(tmp_path):
     (tmp_path / m.file).write_text(text.replace(m.original, ""))
     with pytest.raises(MutantError, match="occurs 0 times"):
         check(m, tmp_path)
+
+
+def test_equivalent_mutants_are_off_the_list():
+    from benchmarks.mutants import EQUIVALENT
+
+    assert not set(EQUIVALENT) & {m.name for m in MUTANTS}
+    for file, _, reason in EQUIVALENT.values():
+        assert (ROOT / file).is_file() and reason

@@ -1,5 +1,6 @@
 """Semismooth Newton and the VI method on single implicit steps with exact solutions."""
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -388,3 +389,148 @@ def test_singular_newton_system_falls_back_to_the_projection_step():
     assert sol.result == nj.RESULTS.successful
     assert int(sol.iterations) == 1
     assert float(sol.value[0]) == 1.0
+
+
+# --- The VI method's step rules and the Newton watchdog, each against the stage's exact
+# solution: a rule dropped leaves the solver failing or returning a point off it.
+def test_vi_step_grows_from_a_small_initial_step():
+    """alpha grows after an accepted move with L < nu/2: from alpha0 = 1e-3 the relay stage
+    (sliding and slipping) converges in tens of iterations. A fixed alpha = 1e-3 contracts
+    by about 1 - alpha per iteration: still 1e-2 off after the 200 allowed."""
+    solver = nj.FixedPointVI(rtol=1e-10, atol=1e-12, alpha0=1e-3, max_steps=200)
+    for xn, expected in ((0.05, (0.0, 0.8)), (0.5, (0.43, 1.0))):
+        sol = relay_step_jit(solver, xn, 0.3, 0.1)
+        assert sol.result == nj.RESULTS.successful, sol.iterations
+        np.testing.assert_allclose(sol.value, expected, rtol=0, atol=1e-9)
+
+
+def test_vi_extragradient_only_at_a_safe_step():
+    """A skew-coupled stage R(y) = A y - b, A = [[0.1, 10], [-10, 0]], with w in [-1, 1]:
+    monotone, plain projection cycles (no contraction), and the extragradient step is
+    safe only for alpha |A| <= nu. From alpha0 = 1 the guard rejects and shrinks until
+    then, and the iteration converges to the exact solution (w interior: A y = b). Taking
+    the extragradient step at alpha = 1 regardless diverges to the box's edge (measured:
+    x = 10.75, w = 1 after 500 iterations)."""
+    A, b = jnp.array([[0.1, 10.0], [-10.0, 0.0]]), jnp.array([1.0, 0.5])
+    solver = nj.FixedPointVI(rtol=1e-10, atol=1e-12, max_steps=500)
+    sol = solver.solve(lambda y: A @ y - b, RELAY_P, 1.0, jnp.zeros(2))
+    assert sol.result == nj.RESULTS.successful, sol.iterations
+    np.testing.assert_allclose(sol.value, np.linalg.solve(A, b), rtol=1e-9)
+
+
+def test_vi_returns_the_projection_step_that_solves_explicit_rows():
+    """A ball in free flight, q = q0 + h v, v = v0 - h g, at a loose tolerance whose
+    stopping test passes one iteration before q has caught up with v (h^2 g = 1e-5 below
+    rtol |q| = 1e-4): ending with the projection step returns both rows solved to
+    round-off; returning the iterate leaves q off by h^2 g (the tolerance's size, what
+    sustains micro-bounces of a ball at rest)."""
+    q0, v0, h = 1.0, -1.0, 1e-3
+    sol = contact_step(nj.FixedPointVI(rtol=1e-4, atol=1e-10), jnp.array(q0), jnp.array(v0), 0.5, h)
+    q, v = (float(c) for c in sol.value)
+    assert sol.result == nj.RESULTS.successful
+    assert abs(v - (v0 - h * G)) <= 1e-15 and abs(q - (q0 + h * v)) <= 1e-15, (q, v)
+
+
+def test_newton_watchdog_leaves_a_false_minimum_of_the_merit():
+    """A stage R(y) = A y + 0.1 y^3 - b, y1 in [-1, 1], y2 >= 0, whose merit |G|^2 / 2 has a
+    local minimum that is no solution in the basin of y = 0: a monotone line search from
+    the first iteration stalls there (max |G| stays at 0.83; max_steps reached); the default
+    solver's full Newton steps first (the watchdog) let |G| grow (to 52) and then converge.
+    The solution is checked in numpy: R_0 = 0, y1 = clip(y1 - R_1), y2 = max(0, y2 - R_2)."""
+    A = np.array([[-0.8, -1.2, -0.1], [0.3, 1.7, -0.3], [1.0, -0.3, 0.3]])
+    b = np.array([0.9, 0.2, 0.6])
+
+    def residual(y):
+        return jnp.asarray(A) @ y + 0.1 * y**3 - jnp.asarray(b)
+
+    solve = jax.jit(
+        lambda s: s.solve(residual, _BOX_AND_ORTHANT, 1.0, jnp.zeros(3)), static_argnums=0
+    )
+    stalled = solve(nj.SemismoothNewton(full_steps=0))
+    assert stalled.result == nj.RESULTS.nonlinear_max_steps_reached
+    sol = solve(nj.SemismoothNewton())
+    assert sol.result == nj.RESULTS.successful
+    y = np.asarray(sol.value)
+    R = A @ y + 0.1 * y**3 - b
+    natural = y - np.array([y[0] - R[0], np.clip(y[1] - R[1], -1, 1), max(0.0, y[2] - R[2])])
+    assert np.max(np.abs(natural)) <= 1e-7, (y, natural)
+
+
+@pytest.mark.parametrize("name", SOLVERS)
+def test_a_successful_value_passes_the_stopping_test(name):
+    """`successful` means the returned value passes the solver's own stopping test,
+    max |G| / (atol + rtol |y|) <= 1 with G(y) = y - P(y - rho R(y)). On a stiff free row
+    (a backward Euler stage of y' = -k y^3, rho = h, k h = 1e2 and 1e4) the iterate does;
+    the Picard point y - rho R(y) has G amplified by |1 - rho R'| = 3 k h y^2 (measured 8
+    to 42 times the tolerance with the VI method): free components keep the iterate."""
+    from nivpjax._nonlinear.base import scaled_error
+
+    rtol, atol = 1e-4, 1e-8
+    solver = eqx.tree_at(lambda s: (s.rtol, s.atol), SOLVERS[name], (rtol, atol))
+    for kh in (1e2, 1e4):
+        residual = lambda y, kh=kh: (y - 1.0) + kh * y**3  # noqa: E731
+        sol = solver.solve(residual, lambda z, y, rho: z, 1.0, jnp.ones(1))
+        assert sol.result == nj.RESULTS.successful
+        G = residual(sol.value)  # rho = 1, P the identity
+        assert float(scaled_error(G, sol.value, rtol, atol)) <= 1.0, (kh, sol.value, G)
+
+
+def test_vi_moves_from_its_initial_guess_on_a_tiny_step():
+    """A stage whose whole update lies below the tolerance (y' = 1 over h = 1e-10 from
+    y0 = 1, rtol 1e-8): a solve that stopped at its initial guess would return the step's
+    start and freeze the state (see `test_tiny_steps_do_not_freeze_the_state`). With
+    alpha0 = 1/2 the VI method's first predictor moves half the update, within the
+    tolerance: it must still take that move, and ends within half the update of the
+    exact 1 + 1e-10, on its side of the start."""
+    h = 1e-10
+    solver = nj.FixedPointVI(alpha0=0.5)
+    sol = solver.solve(lambda y: (y - 1.0) / h - 1.0, lambda z, y, rho: z, h, jnp.ones(1))
+    moved = float(sol.value[0]) - 1.0
+    assert 0.5 * h <= moved <= 1.5 * h, moved
+
+
+def test_vi_iterations_do_not_grow_as_the_step_shrinks():
+    """The stage scales multiplier rows by rho = tau / h (they enter the state with weight
+    h) and equation rows by rho = tau (O(1) sensitivity), so that the map the VI method
+    iterates does not degrade as h shrinks. One backward Euler step of a relay
+    (x' = -w + 0.3 from x = 0.01: sliding at h = 0.1, w = 0.3 + x0 / h; slipping below,
+    w = 1) and of a conducting diode behind a resistor (x' = cos t - x - i, i = (cos t - x)
+    / 2, from x = 0.2: x1 = (x0 + h cos(h) / 2) / (1 + h / 2)), at h = 1e-1 to 1e-4: the
+    VI method converges in at most 40 iterations at every h (measured 10 to 33), to the
+    exact step. Measured with rho = tau on the relay's rows: 73 to 141 iterations; with
+    tau / h on the diode's: no convergence in 500 below h = 0.1."""
+    from nivpjax._model import Model
+
+    def relay_exact(h):
+        return [0.0, 0.3 + 0.01 / h] if h > 0.01 / 0.7 else [0.01 - 0.7 * h, 1.0]
+
+    def diode_exact(h):
+        x1 = (0.2 + 0.5 * h * np.cos(h)) / (1 + 0.5 * h)
+        return [x1, 0.5 * (np.cos(h) - x1)]
+
+    relay = nj.Relay("w", lambda t, x, a: x)
+    diode = nj.Diode("i", lambda t, x, i, a: jnp.cos(t) - x[:1] - 2.0 * i)
+    cases = [
+        (nj.Scene(lambda t, x, a, m: -m["w"] + 0.3, 1, (relay,)), [0.01, 0.3], relay_exact),
+        (
+            nj.Scene(lambda t, x, a, m: jnp.cos(t) - x - m["i"], 1, (diode,)),
+            [0.2, 0.1],
+            diode_exact,
+        ),
+    ]
+    for scene, y0, exact in cases:
+        mass = scene.full_mass_matrix
+        model = Model.build(
+            scene.vector_field,
+            scene.projector,
+            mass,
+            np.asarray(mass.diagonal() == 0),
+            equation_rows=scene.equation_rows,
+        )
+        stepper = nj.BackwardEuler(nj.FixedPointVI())
+        step = jax.jit(lambda h: stepper.step(model, 0.0, h, jnp.array(y0), None))
+        for h in (1e-1, 1e-2, 1e-3, 1e-4):
+            out = step(jnp.asarray(h))
+            assert out.stats.nonlinear_result == nj.RESULTS.successful, (y0, h)
+            assert int(out.stats.iterations) <= 40, (y0, h, out.stats.iterations)
+            np.testing.assert_allclose(out.y1, exact(h), rtol=1e-6, atol=1e-9)

@@ -1006,3 +1006,31 @@ def test_contact_matches_reference(case, record_property):
     assert used >= 10
     _report(record_property, f"contact_{case}", worst)
     assert worst <= 1e-8
+
+
+def test_coulomb_violation_sees_a_missed_breakaway():
+    # A step that ends stuck (v1 = 0) while the applied force there exceeds the bound c
+    # missed a breakaway: the body would gain h (|F| - c) of velocity in one step, which
+    # the violation reports in velocity units (a scheme checking the stick against an
+    # average force over the step lets a growing load past the static bound). Within the
+    # bound, or still slipping, nothing; a reversal counts its smaller speed.
+    friction = nv.CoulombFriction(bound=2.0)
+    h = 0.1
+
+    def violation(v0, v1, force):
+        ctx = nv.ProjectionContext(
+            t=jnp.asarray(1.0),
+            h=jnp.asarray(h),
+            y_prev=jnp.array([v0]),
+            y_iter=jnp.array([v1]),
+            rho=jnp.ones(1),
+            args=None,
+            rate=jnp.array([force]),
+        )
+        return float(friction.violation(ctx))
+
+    np.testing.assert_allclose(violation(0.0, 0.0, 3.5), h * 1.5, rtol=1e-14)
+    np.testing.assert_allclose(violation(0.3, 0.0, -2.5), h * 0.5, rtol=1e-14)
+    assert violation(0.0, 0.0, 1.9) == 0.0
+    assert violation(0.3, 0.2, 3.5) == 0.0
+    np.testing.assert_allclose(violation(0.3, -0.2, 0.0), 0.2, rtol=1e-14)

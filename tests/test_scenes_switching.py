@@ -530,3 +530,39 @@ def test_chua_kinks(chua_run):
     got = ts[k] - g[k] * (ts[k + 1] - ts[k]) / (g[k + 1] - g[k])
     assert got.shape == crossings.shape
     np.testing.assert_allclose(got, crossings, rtol=0, atol=2e-5)
+
+
+def _event_time(scene, y0, y1, h):
+    # The model's predicted time from the step's start to its first event (`next_event`),
+    # for one step of size h from t = 0.
+    from nivpjax._model import Model
+
+    model = Model.build(
+        scene.vector_field,
+        scene.projector,
+        scene.full_mass_matrix,
+        np.asarray(scene.full_mass_matrix.diagonal() == 0),
+        equation_rows=scene.equation_rows,
+    )
+    return float(model.next_event(jnp.asarray(h), h, jnp.asarray(y0), jnp.asarray(y1), None))
+
+
+def test_saturation_and_diode_events_are_their_switches():
+    # The event surfaces of the scene effects change sign exactly where the law switches,
+    # so the controller sees the switch. u(t) = x rising or falling at rate 1 through a
+    # saturation's bound at half the step: the secant of the surface is exact for a linear
+    # signal, tau = h / 2, at either bound. A diode behind a series resistor R (voltage
+    # x - R i) turning off as its source x falls through 0 at half the step: the voltage
+    # it would see without current changes sign there (with its current, the voltage is 0
+    # while it conducts: no sign change, no event).
+    h = 0.2
+    for rate, x0, x1, s0, s1 in ((1.0, 0.9, 1.1, 0.9, 1.0), (-1.0, -0.9, -1.1, -0.9, -1.0)):
+        sat = nj.Saturation("s", lambda t, x, a: x[:1])
+        scene = nj.Scene(lambda t, x, a, m, r=rate: jnp.full(1, r), 1, (sat,))
+        tau = _event_time(scene, [x0, s0], [x1, s1], h)
+        np.testing.assert_allclose(tau, h / 2, rtol=1e-12)
+    R = 2.0
+    diode = nj.Diode("i", lambda t, x, i, a: x[:1] - R * i)
+    scene = nj.Scene(lambda t, x, a, m: -jnp.ones(1), 1, (diode,))
+    tau = _event_time(scene, [0.1, 0.1 / R], [-0.1, 0.0], h)
+    np.testing.assert_allclose(tau, h / 2, rtol=1e-12)

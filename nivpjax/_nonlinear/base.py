@@ -77,8 +77,10 @@ def dense_solve(J, b):
 
 def _tangent_solve(g, b):
     # g is the linearisation of G at the solution (its generalised Jacobian, with the
-    # projectors' custom-JVP elements); solve g(x) = b densely. The Jacobian is taken at
-    # zero, so that nothing but the solve touches `b`: reverse mode transposes this in `b`.
+    # projectors' custom-JVP elements); solve g(x) = b densely. g is linear, so its
+    # Jacobian is the same at every point: taken at zero, `b` visibly enters through the
+    # solve alone, linearly, as reverse mode's transposition in `b` needs. (Taking it at
+    # `b` changes nothing: JAX drops the unused primal g(b); an equivalent mutant.)
     J = jax.jacfwd(g)(jnp.zeros_like(b))
     x, _ = dense_solve(J, b)
     return x

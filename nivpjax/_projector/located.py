@@ -70,7 +70,9 @@ class EventLocated(AbstractProjector):
         the whole step: an error of order $h$ times the jump of the Jacobian, which does
         not vanish with the tolerance when the step at the switch does not shrink (a diode
         turning off with $h\,/(R_s C) \approx 0.2$: $d v/d R_L$ 6% off just after the
-        switch). The value is unchanged; the derivative is that of the projector at
+        switch, measured before event landing put steps just short of switches; the
+        half-wave rectifier's derivatives are now the same without this element). The
+        value is unchanged; the derivative is that of the projector at
         $z + 2(w_0 - w_1)$, which lies on the start's side of a kink between bound and
         interior (box, orthant) for a selection $w$ that moved from $w_0$ to $w_1$.
         Components whose surface changed sign in the stage's first half keep the end

@@ -34,7 +34,11 @@ def bathe_error(gamma, h, F0, Fg, F1):
 def _stage_reactions(model, g, t0, h, y0, f0, mult1, mult2, args):
     # The reactions at t0, t0 + gamma h and t1 from the stage averages: r_a is the
     # trapezoidal stage's mean over [0, gamma], r_b the value at t1. Taken linear in time
-    # (a body stuck under a slowly varying load then has exactly zero estimate), except on
+    # (a body stuck under a slowly varying load then has exactly zero estimate; any line
+    # drops out of bathe_error algebraically, so the estimate is f's to rounding. Kept:
+    # dropping the line changes the estimate by ~1e-19 against 1e-7, and that alone sent
+    # the super-twisting run of test_scenes_switching from 2290 attempts to max_steps,
+    # stuck at t = 3.29 with h = 2.6e-6), except on
     # the rows whose reaction the first stage weighed (`Model.weighed`: friction, a
     # persistent contact), where it applied the law's reaction at t0: there the three
     # values are the reactions themselves, so that the estimate sees a reaction that turns
@@ -66,9 +70,11 @@ class Bathe(AbstractStepper):
 
     **Embedded error estimate** (error order 3, no extra implicit solve): the difference
     between the scheme and the third-order quadrature on its three nodes, applied to the
-    effective rates $F = f + r$, where $r$ is the constraint reaction of the stages
-    (taken linear in time over the step, so that a body stuck or resting under a slowly
-    varying load has exactly zero estimate); see `bathe_error`.
+    effective rates $F = f + r$, where $r$ is the constraint reaction of the stages taken
+    linear in time over the step; see `bathe_error`. A line has zero second divided
+    difference, so $r$ drops out (to rounding) and a body stuck or resting under a load
+    linear in time has exactly zero estimate; applied at $t_1$ alone, the holding force
+    would count as error.
 
     Impacts closing at the start of the step are applied first
     ([`nivpjax.AbstractProjector.impact`][]), and the stages integrate the smooth flow

@@ -93,10 +93,13 @@ def switch_kink_error(model, theta, t0, h, y0, y1, f0, f1, switched, args):
     event inside the step (a step landing on it is charged nothing), 0 otherwise.
 
     The defect term of `theta_error` charges the same where $f$ carries the switch
-    (multipliers); this one is for laws applied as proximal maps, without multipliers,
-    whose reaction the estimate takes as constant over the step, so that $D = 0$:
-    measured, a block sliding to rest on a plane (isotropic friction) ended 1.8e-2 off at
-    every `rtol` with the trapezoidal rule, in eight steps, `successful`."""
+    (multipliers) or the stage weighs the law at both ends (friction as a proximal map,
+    `Model.law_reaction`); this one is for laws without multipliers whose reaction the
+    estimate takes as constant over the step, so that $D = 0$: a normal cone on a
+    differential row (a velocity bound reached inside the step: the estimate was 0
+    without this term, see `test_theta_estimate_charges_a_face_reached_inside_the_step`).
+    Measured before friction was weighed: a block sliding to rest on a plane ended 1.8e-2
+    off at every `rtol` with the trapezoidal rule, in eight steps, `successful`."""
     if isinstance(model.projector, Identity) or model.has_impulses:
         # Contacts have charges of their own (impacts at the step's start, landings);
         # a contact opening after an impact is no kink of the flow.
