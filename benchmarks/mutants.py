@@ -1303,6 +1303,98 @@ MUTANTS = [
         "(measured: an estimate 500x too small on the half-wave rectifier)",
         (TE + "test_estimate_sees_an_equation_row",),
     ),
+    # --- Issue 33: contacts held closed on curved gaps. ---
+    Mutant(
+        "contact_stage_normals_at_start",
+        "projectors",
+        P + "contact.py",
+        "Wt, B = self._maps(ctx.t, ctx.y_iter, ctx.args, z.dtype)",
+        "Wt, B = self._maps(ctx.t, ctx.y_prev, ctx.args, z.dtype)",
+        "UnilateralContact._project: the stage's normals where it ends (with the start's, a "
+        "body sliding along a curved wall ends approaching it: an impact per step, a stall)",
+        (
+            "tests/test_curved_contact.py::test_adaptive_error_falls_with_rtol[bead-bathe]",
+            "tests/test_curved_contact.py::test_order_at_fixed_steps[bathe]",
+        ),
+    ),
+    Mutant(
+        "contact_end_normals_at_start",
+        "projectors",
+        P + "contact.py",
+        "Wt1, _ = self._maps(ctx.t, ctx.y_iter, ctx.args, dtype)",
+        "Wt1, _ = self._maps(ctx.t, ctx.y_prev, ctx.args, dtype)",
+        "UnilateralContact._end: the end's normals (the start's read a body sliding along a "
+        "curved wall as approaching: Bathe's first stage 'switched', its second restarted as "
+        "backward Euler, order 1)",
+        (
+            "tests/test_curved_contact.py::test_order_at_fixed_steps[bathe]",
+            "tests/test_curved_contact.py::test_adaptive_error_falls_with_rtol[bead-bathe]",
+        ),
+    ),
+    Mutant(
+        "normal_acceleration_without_curvature",
+        "projectors",
+        P + "contact.py",
+        "return jax.jvp(normal_velocity, (jnp.asarray(y, dtype),), (rate,))[1]",
+        "return self._maps(ctx.t, y, ctx.args, dtype)[0] @ ctx.restrict(rate)",
+        "_normal_acceleration: the curvature term (dW^T/dt) v, v^2/R on a circular wall (a bead "
+        "without gravity is pressed by it alone)",
+        (
+            "tests/test_curved_contact.py::test_order_at_fixed_steps[bathe]",
+            "tests/test_curved_contact.py::test_adaptive_error_falls_with_rtol[bead-bathe]",
+        ),
+    ),
+    Mutant(
+        "held_gaps_sign",
+        "projectors",
+        P + "held_gap.py",
+        "mu = jnp.linalg.solve(D, -jnp.where(held, gap, 0.0))",
+        "mu = jnp.linalg.solve(D, jnp.where(held, gap, 0.0))",
+        "HeldGaps: g(z) + W^T B mu = 0 on held contacts (the correction onto the gap)",
+        (
+            "tests/test_curved_contact.py::test_held_on_the_wall_with_its_reaction[bathe]",
+            "tests/test_curved_contact.py::test_adaptive_error_falls_with_rtol[bowl-bathe]",
+        ),
+    ),
+    Mutant(
+        "curved_contact_not_weighed",
+        "projectors",
+        "nivpjax/_scene/contact.py",
+        "weighed=self.curved,",
+        "weighed=False,",
+        "Contact(curved=True): the persistent contact's reaction weighed at both ends of the "
+        "trapezoidal stages (applied whole at the stage's end along a turning normal: order 1)",
+        (
+            "tests/test_curved_contact.py::test_order_at_fixed_steps[tr]",
+            "tests/test_curved_contact.py::test_order_at_fixed_steps[bathe]",
+        ),
+    ),
+    Mutant(
+        "bathe_weighed_reactions_linear",
+        "steppers",
+        S + "bathe.py",
+        "r_mid = jnp.where(model.weighed, 2 * r_a - law0, r_mid)",
+        "r_mid = jnp.where(model.weighed, r0 + g * (r_b - r0), r_mid)",
+        "_stage_reactions: the weighed rows' reactions at the three nodes (a line drops out of "
+        "the estimate: 7x below the error on the bowl, half the steps of the force in f)",
+        (
+            "tests/test_curved_contact.py::test_bowl_as_accurate_as_the_force_in_the_field",
+            "tests/test_friction_order.py::test_adaptive_as_accurate_as_the_smooth_field[disk-bathe]",
+        ),
+    ),
+    Mutant(
+        "law_keeps_impacts",
+        "projectors",
+        P + "contact.py",
+        "            start_active = self.pressed(ctx, z.dtype)",
+        "            start_active = start_active",
+        "ProjectionContext.law: the law's reaction keeps persistent contacts only (an impact's "
+        "holding part read as a force)",
+        (
+            "tests/test_curved_contact.py::test_adaptive_error_falls_with_rtol[thrown-tr]",
+            "tests/test_curved_contact.py::test_adaptive_error_falls_with_rtol[thrown-bathe]",
+        ),
+    ),
 ]
 
 # Equivalent mutants, excluded from the list and the score (standard practice: a mutant no
