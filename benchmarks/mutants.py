@@ -1391,8 +1391,8 @@ MUTANTS = [
         "ProjectionContext.law: the law's reaction keeps persistent contacts only (an impact's "
         "holding part read as a force)",
         (
+            "tests/test_curved_contact.py::test_law_reaction_is_a_persistent_contacts_force_only",
             "tests/test_curved_contact.py::test_adaptive_error_falls_with_rtol[thrown-tr]",
-            "tests/test_curved_contact.py::test_adaptive_error_falls_with_rtol[thrown-bathe]",
         ),
     ),
 ]

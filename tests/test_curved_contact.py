@@ -175,3 +175,23 @@ def test_bowl_as_accurate_as_the_force_in_the_field():
         errs.append(np.max(np.abs(ys - _exact("bowl", ts))))
     assert errs[1] < 2 * errs[0], errs
     assert 0.8 * int(smooth.n_accepted) <= int(effect.n_accepted) <= 1.2 * int(smooth.n_accepted)
+
+
+def test_law_reaction_is_a_persistent_contacts_force_only():
+    # The reaction the stages weigh (`Model.law_reaction`) at a point on the wall: the
+    # normal force N = v^2 + g cos(phi) where the flow presses the ball into it (here at
+    # the bottom, phi = 0, speed 1: N = 1 + g, along -q), none where the ball reaches the
+    # wall moving into it (an impact, whose holding part is no force of the flow) or
+    # leaves it.
+    model = nj.Model.build(
+        SCENE.vector_field, SCENE.projector, None, np.zeros(4, bool), tau=1.0, equation_rows=None
+    )
+
+    def reaction(y):
+        y = jnp.asarray(y)
+        return np.asarray(model.law_reaction(0.0, 1e-3, y, model.f(0.0, y, ARGS), ARGS))
+
+    pressed = reaction([0.0, -1.0, 1.0, 0.0])
+    np.testing.assert_allclose(pressed, [0.0, 0.0, 0.0, 1.0 + float(ARGS["g"])], atol=1e-6)
+    for v in ([0.0, -0.5], [0.0, 0.5]):  # into the wall, away from it
+        np.testing.assert_array_equal(reaction([0.0, -1.0, *v]), 0.0)
