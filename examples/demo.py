@@ -67,8 +67,9 @@ def slider_exact(m=1.0, k=1.0, fric=0.6, v0=0.1):
 
 # (name, scene, end time, exact reference, the two tolerances of its rows)
 SCENES = [
-    # The ball's error follows the tolerance down to round-off (the margin by which steps
-    # land before an impact shrinks with rtol below 1e-6): its second row is at rtol 1e-8.
+    # The ball's error follows the tolerance down to round-off (with event_margin=None the
+    # margin by which steps land before an impact shrinks with rtol below 1e-6): its second
+    # row is at rtol 1e-8.
     ("bouncing ball (e=0.8, t=1.5)", S.bouncing_ball(), 1.5, lambda: ball_exact(1.5), (1e-3, 1e-8)),
     ("spring-slider, Coulomb stick", S.spring_slider(), 2.0, slider_exact, (1e-3, 1e-6)),
     # The relay's final state sits on the sliding surface (error exactly 0): measure its
@@ -111,7 +112,8 @@ def main():
         for rtol in rtols:
             # Tolerances are run-time values: both rows share one compiled solve per scene
             # (the first row's "compile s" includes it, the second's is ~0).
-            ctrl = nj.PIDController(rtol=rtol, atol=rtol * 1e-2)
+            # event_margin=None: steps land before an impact by a margin that follows rtol.
+            ctrl = nj.PIDController(rtol=rtol, atol=rtol * 1e-2, event_margin=None)
             run = lambda x0, args, s=scene, c=ctrl, t1=t1: s.solve(
                 0.0, t1, x0, args, controller=c, max_steps=4096, t_eval=t_eval
             )

@@ -8,22 +8,25 @@ from .base import StepInfo
 
 EVENT_SKIP = 1e-2
 
-# The default margin short of a predicted event: `MARGIN_PER_RTOL * rtol`, at most
-# `MARGIN_MAX` (so unchanged for rtol >= 1e-6). Below that, a step lands closer to the
-# event: the impact applied early by that fraction of a step, and a landing that the
-# prediction's own error carries across the contact is rejected and retried by the
-# violation test, both fall with the tolerance. A fixed 1e-8 held a bouncing ball's error at
-# 1.1e-7 for every rtol from 1e-3 to 1e-10; now 8e-10 at rtol 1e-8 and 3e-12 at 1e-10
-# (`tests/test_event_margin.py`). Smaller margins at rtol 1e-6 (1e-9) bought rejections
-# and no accuracy: 49 rejections for 132 steps on the Zeno ball against 0 for 88
-# (`tests/test_event_prediction.py`), the same 1.1e-7 to 1.9e-7 error.
+# The margin short of a predicted event that follows the tolerance (`event_margin=None`,
+# opt-in): `MARGIN_PER_RTOL * rtol`, at most `MARGIN_MAX` (so 1e-8 for rtol >= 1e-6).
+# Below that, a step lands closer to the event: the impact applied early by that fraction
+# of a step, and a landing that the prediction's own error carries across the contact is
+# rejected and retried by the violation test, both fall with the tolerance. The default
+# fixed 1e-8 holds a bouncing ball's error at 1.1e-7 for every rtol from 1e-3 to 1e-10;
+# this one gives 8e-10 at rtol 1e-8 and 3e-12 at 1e-10 (`tests/test_event_margin.py`).
+# Smaller margins at rtol 1e-6 (1e-9) bought rejections and no accuracy: 49 rejections for
+# 132 steps on the Zeno ball against 0 for 88 (`tests/test_event_prediction.py`). Not the
+# default: a spring slider's derivative through its friction reversals came out 14% off
+# at rtol 1e-8 with it (`test_slider_reversals_converge_to_exact_derivative`).
 MARGIN_MAX = 1e-8
 MARGIN_PER_RTOL = 1e-2
 
 
 def event_margin(margin, rtol):
-    """The relative margin short of a predicted event: `margin` when the user gave one,
-    else `min(MARGIN_MAX, MARGIN_PER_RTOL * rtol)` (`rtol` may be a run-time value)."""
+    """The relative margin short of a predicted event: `margin` when given (the
+    controllers' default is 1e-8), `min(MARGIN_MAX, MARGIN_PER_RTOL * rtol)` for `None`
+    (`rtol` may be a run-time value)."""
     if margin is not None:
         return margin
     return jnp.minimum(MARGIN_MAX, MARGIN_PER_RTOL * jnp.asarray(rtol))

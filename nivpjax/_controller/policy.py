@@ -83,7 +83,7 @@ class PolicyController(AbstractController):
     policy_accepts: bool = eqx.field(static=True, default=False)
     differentiable_factor: bool = eqx.field(static=True, default=False)
     event_prediction: bool = eqx.field(static=True, default=True)
-    event_margin: float | None = None
+    event_margin: float | None = 1e-8
 
     def __check_init__(self):
         if not callable(self.policy):
