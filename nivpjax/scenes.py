@@ -295,10 +295,10 @@ def ball_in_bowl(
     sphere; gravity along the last axis). State $x = (q, v)$; `args = {"R", "g", "e"}`.
 
     A closed contact on a curved gap: while the ball stays on the wall it is a pendulum,
-    $arphi'' = -(g/R)\sinarphi$ in 2-D ($arphi$ from the bottom), pressed by the
-    normal force $N = Rarphi'^2 + g\cosarphi$ (per unit mass). Thrown from the bottom
+    $\varphi'' = -(g/R)\sin\varphi$ in 2-D ($\varphi$ from the bottom), pressed by the
+    normal force $N = R\varphi'^2 + g\cos\varphi$ (per unit mass). Thrown from the bottom
     with speed $v_0$, $2gR < v_0^2 < 5gR$, it leaves the wall where $N$ reaches zero,
-    $\cosarphi_r = (2g R - v_0^2)/(3gR)$, flies a parabola inside the bowl and lands on
+    $\cos\varphi_r = (2g R - v_0^2)/(3gR)$, flies a parabola inside the bowl and lands on
     the wall again. With `gravity=0` it is a bead running uniformly round a circular wall
     that pushes with $v^2/R$.
     """
