@@ -216,3 +216,52 @@ def test_conical_pendulum_in_a_sphere():
     assert np.max(np.abs(ys[:, 2] + np.cos(alpha))) < 1e-4
     assert np.max(np.abs(np.linalg.norm(ys[:, 3:], axis=1) - speed)) < 1e-4
     np.testing.assert_allclose(ys[-1], x0, atol=1e-3)  # once round (measured 2.7e-4)
+
+
+def test_curvature_is_read_off_the_gap():
+    # Contact(curved=None), the default, decides from the gap's traced Hessian in the
+    # positions: zero whatever the state and the parameters (flat), anything else curved.
+    from nivpjax._scene.curvature import gap_is_affine
+
+    x = jnp.array([1.0, 0.0, 0.0, 1.0])
+    circle = lambda t, x, a: jnp.stack([1 - jnp.sqrt(x[0] ** 2 + x[1] ** 2)])  # noqa: E731
+    assert not gap_is_affine(circle, [0, 1], 0.0, x, {})
+    assert not gap_is_affine(lambda t, x, a: 1 - x[:1] ** 2, [0], 0.0, x, {})  # constant H
+    assert gap_is_affine(lambda t, x, a: x[:1], [0], 0.0, x, {})
+
+    flags = []
+
+    @jax.jit
+    def traced(h):
+        # Under a transformation the parameters are traced: a gap linear in the positions
+        # with a traced coefficient is flat, one that multiplies them together is not.
+        tilted = lambda t, x, a: x[:1] - a["h"] * x[1]  # noqa: E731
+        bent = lambda t, x, a: x[:1] - a["h"] * x[1] ** 2  # noqa: E731
+        flat = gap_is_affine(tilted, [0, 1], 0.0, x, {"h": h})
+        flags.append((flat, gap_is_affine(bent, [0, 1], 0.0, x, {"h": h})))
+        return h
+
+    traced(0.5)
+    assert flags == [(True, False)]
+    ball, x0, args = nj.scenes.bouncing_ball()
+    assert ball.resolved(0.0, x0, args).effects[0].curved is False
+
+
+def test_a_plain_contact_on_a_curved_gap():
+    # The issue's own model: nj.Contact with the gap R - |q| and no flag. Before: every
+    # stepper stopped with max_steps; now it is resolved as curved and runs like the bowl.
+    contact = nj.Contact(
+        gap=lambda t, x, a: jnp.stack([1.0 - jnp.sqrt(x[0] ** 2 + x[1] ** 2)]),
+        positions=[0, 1],
+        velocities=[2, 3],
+        restitution=0.0,
+    )
+    scene = nj.Scene(lambda t, x, a, m: jnp.concatenate([x[2:], jnp.zeros(2)]), 4, (contact,))
+    x0 = jnp.asarray(CASES["bead"][0])
+    assert scene.resolved(0.0, x0, None).effects[0].curved is True
+    rtol = 1e-5
+    sol = scene.solve(
+        0.0, 2.0, x0, stepper=nj.Bathe(), controller=nj.PIDController(rtol=rtol, atol=rtol / 100)
+    )
+    ts, ys, _ = _trajectory(sol)
+    assert np.max(np.abs(ys - _exact("bead", ts))) < 10 * rtol ** (2 / 3)

@@ -1,10 +1,12 @@
 """A scene: smooth dynamics plus the effects it calls for, assembled into one model."""
 
 import abc
+import dataclasses
 from collections.abc import Callable
 from typing import Any
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -45,6 +47,12 @@ class AbstractEffect(eqx.Module):
 
     def constraint(self, t, x, lam, args):
         raise NotImplementedError(f"{type(self).__name__} has no multipliers.")
+
+    def resolved(self, t, x, args) -> "AbstractEffect":
+        """This effect with what it leaves to the data decided from the scene's initial
+        time, states and parameters (a [`nivpjax.Contact`][]'s `curved=None`): the scene's
+        `solve` and `sweep` call it. Default: itself."""
+        return self
 
 
 def scene_state(y, n_states):
@@ -178,15 +186,16 @@ class Scene(eqx.Module):
             raise ValueError(
                 f"`x0` must have shape ({self.n_states},) (the scene's n_states), got {x0.shape}."
             )
+        scene = self.resolved(t0, x0, args)
         return solve(
-            self.vector_field,
+            scene.vector_field,
             t0,
             t1,
-            self.initial_state(x0, multipliers),
+            scene.initial_state(x0, multipliers),
             args,
-            projector=self.projector,
-            mass_matrix=self.full_mass_matrix,
-            equation_rows=self.equation_rows,
+            projector=scene.projector,
+            mass_matrix=scene.full_mass_matrix,
+            equation_rows=scene.equation_rows,
             **kwargs,
         )
 
@@ -204,14 +213,32 @@ class Scene(eqx.Module):
                 f"{x0.shape}."
             )
         y0 = np.stack([np.asarray(self.initial_state(x, multipliers)) for x in np.atleast_2d(x0)])
+        first = _first_member(args, kwargs.get("args_axes", 0))
+        scene = self.resolved(t0, np.atleast_2d(x0)[0], first)
         return solve_batched(
-            self.vector_field,
+            scene.vector_field,
             t0,
             t1,
             y0[0] if x0.ndim == 1 else y0,
             args,
-            projector=self.projector,
-            mass_matrix=self.full_mass_matrix,
-            equation_rows=self.equation_rows,
+            projector=scene.projector,
+            mass_matrix=scene.full_mass_matrix,
+            equation_rows=scene.equation_rows,
             **kwargs,
         )
+
+    def resolved(self, t0, x0, args) -> "Scene":
+        """The scene with each effect's data-dependent choices made
+        (`AbstractEffect.resolved`) at the initial time, states and parameters."""
+        effects = tuple(e.resolved(t0, jnp.asarray(x0), args) for e in self.effects)
+        if all(new is old for new, old in zip(effects, self.effects)):
+            return self
+        return dataclasses.replace(self, effects=effects)
+
+
+def _first_member(args, axes):
+    # The first member of a batch of parameters (leaves batched along `axes` = 0), for
+    # decisions made from the parameters' structure; other axes: the parameters as given.
+    if axes != 0:
+        return args
+    return jax.tree.map(lambda a: a[0] if np.ndim(a) > 0 else a, args)

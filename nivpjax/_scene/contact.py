@@ -1,3 +1,5 @@
+import dataclasses
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -5,6 +7,7 @@ import numpy as np
 
 from .._projector import Bound, HeldGaps, UnilateralContact
 from .base import AbstractEffect, scene_state
+from .curvature import gap_is_affine
 
 
 class Contact(AbstractEffect):
@@ -18,14 +21,16 @@ class Contact(AbstractEffect):
     - `inverse_mass`: $M^{-1}$ (constant, `(n_dof, n_dof)`), default identity: impulses
       change velocities by $M^{-1} \nabla g\, p$.
 
-    - `curved`: the gap is not affine in the positions (a wall that bends: a bowl, a
-      circular track, a cam; static, default `False`). A closed contact on such a gap
-      drifts off it by $O(h^2)$ per step at velocity level, and its reaction turns with
-      the normal: with `curved=True` persistent contacts are held on their gap at
-      position level ([`nivpjax.HeldGaps`][]) and their reaction is weighed at both ends
-      of the trapezoidal stages, which keeps Bathe's scheme and the trapezoidal rule at
-      second order (backward Euler at first). A flat gap needs neither; the run is
-      the same without.
+    - `curved`: whether the gap is not affine in the positions (a wall that bends: a
+      bowl, a circular track, a cam; static). A closed contact on such a gap drifts off
+      it by $O(h^2)$ per step at velocity level, and its reaction turns with the normal:
+      with `curved=True` persistent contacts are held on their gap at position level
+      ([`nivpjax.HeldGaps`][]) and their reaction is weighed at both ends of the
+      trapezoidal stages, which keeps Bathe's scheme and the trapezoidal rule at second
+      order (backward Euler at first). A flat gap needs neither. The default `None`
+      decides when the scene is solved, from the gap's traced Hessian in the positions
+      (zero whatever the state and the parameters: flat; see `resolved`); a projector
+      built from an unresolved contact treats it as flat.
 
     The contact normals $W^T = \partial g / \partial q$ come from autodiff of `gap`. See
     [`nivpjax.UnilateralContact`][] for the active set, the LCP and event location.
@@ -38,7 +43,7 @@ class Contact(AbstractEffect):
     inverse_mass: object = None
     lookahead: float = 0.5
     name: str = eqx.field(static=True, default="contact")
-    curved: bool = eqx.field(static=True, default=False)
+    curved: bool | None = eqx.field(static=True, default=None)
 
     def __init__(
         self,
@@ -49,7 +54,7 @@ class Contact(AbstractEffect):
         inverse_mass=None,
         lookahead=0.5,
         name="contact",
-        curved=False,
+        curved=None,
     ):
         self.gap = gap
         self.positions = tuple(int(i) for i in np.atleast_1d(positions))
@@ -60,7 +65,16 @@ class Contact(AbstractEffect):
         self.inverse_mass = None if inverse_mass is None else jnp.asarray(inverse_mass)
         self.lookahead = lookahead
         self.name = name
-        self.curved = bool(curved)
+        self.curved = None if curved is None else bool(curved)
+
+    def resolved(self, t, x, args) -> "Contact":
+        """With `curved=None`, this contact with `curved` set: `False` when the Hessian
+        of `gap` in the positions is zero whatever the state and the parameters (read
+        off its traced program, at trace time), `True` otherwise."""
+        if self.curved is not None:
+            return self
+        affine = gap_is_affine(self.gap, self.positions, t, x, args)
+        return dataclasses.replace(self, curved=not affine)
 
     def blocks(self, n_states, offset):
         normals = _Normals(self.gap, n_states, self.positions)
@@ -71,7 +85,7 @@ class Contact(AbstractEffect):
             impulse_map=impulse_map,
             restitution=self.restitution,
             lookahead=self.lookahead,
-            weighed=self.curved,
+            weighed=bool(self.curved),
         )
         if not self.curved:
             return [(self.velocities, projector)]
