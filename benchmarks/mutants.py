@@ -1360,7 +1360,7 @@ MUTANTS = [
         "curved_contact_not_weighed",
         "projectors",
         "nivpjax/_scene/contact.py",
-        "weighed=self.curved,",
+        "weighed=bool(self.curved),",
         "weighed=False,",
         "Contact(curved=True): the persistent contact's reaction weighed at both ends of the "
         "trapezoidal stages (applied whole at the stage's end along a turning normal: order 1)",
