@@ -1,5 +1,7 @@
 """Position-level companion of a velocity-level contact: closed contacts held on their gap."""
 
+import dataclasses
+
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
@@ -41,23 +43,11 @@ class HeldGaps(AbstractProjector):
     contact: UnilateralContact
     velocities: tuple[int, ...] = eqx.field(static=True)
 
-    def _velocity_context(self, ctx: ProjectionContext) -> ProjectionContext:
-        return ProjectionContext(
-            t=ctx.t,
-            h=ctx.h,
-            y_prev=ctx.y_prev,
-            y_iter=ctx.y_iter,
-            rho=ctx.rho,
-            args=ctx.args,
-            block=self.velocities,
-            start_rate=ctx.start_rate,
-            tangent=ctx.tangent,
-            law=ctx.law,
-        )
-
     def held(self, ctx: ProjectionContext):
         """The contacts this stage holds on their gap (see the class docstring)."""
-        return self.contact.pressed(self._velocity_context(ctx), ctx.y_prev.dtype)
+        # The contact reads its normal velocities on its own rows, the velocities.
+        velocity_ctx = dataclasses.replace(ctx, block=self.velocities)
+        return self.contact.pressed(velocity_ctx, ctx.y_prev.dtype)
 
     def __call__(self, z, ctx: ProjectionContext):
         z = jnp.asarray(z)
