@@ -1395,6 +1395,19 @@ MUTANTS = [
             "tests/test_curved_contact.py::test_adaptive_error_falls_with_rtol[thrown-tr]",
         ),
     ),
+    Mutant(
+        "initial_multipliers_first_stage_only",
+        "steppers",
+        "nivpjax/_model.py",
+        "jnp.where(rows & ok, be.value, y)",
+        "jnp.where(rows & ok & False, be.value, y)",
+        "Model.consistent_initial_state: a reaction acting through the velocity is determined "
+        "by a backward Euler stage, not left at its guess (the trapezoidal rule rings)",
+        (
+            "tests/test_consistent_init.py::test_initial_reaction_is_the_physical_one",
+            "tests/test_consistent_init.py::test_relay_started_on_its_surface_takes_the_equivalent_control",
+        ),
+    ),
 ]
 
 # Equivalent mutants, excluded from the list and the score (standard practice: a mutant no
