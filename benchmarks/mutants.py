@@ -1408,6 +1408,19 @@ MUTANTS = [
             "tests/test_consistent_init.py::test_relay_started_on_its_surface_takes_the_equivalent_control",
         ),
     ),
+    Mutant(
+        "step_doubling_pi_sign",
+        "controllers",
+        C + "step_doubling.py",
+        "jnp.where(use_prev, prev, 1.0) ** -beta",
+        "jnp.where(use_prev, prev, 1.0) ** beta",
+        "StepDoublingController: the reference's PI rule raises E_prev to -beta (its sign, "
+        "kept for the baseline)",
+        (
+            "tests/test_step_doubling.py::test_decisions_on_hand_made_errors",
+            "tests/test_step_doubling.py::test_same_steps_as_the_reference",
+        ),
+    ),
 ]
 
 # Equivalent mutants, excluded from the list and the score (standard practice: a mutant no

@@ -13,6 +13,7 @@ from ._controller import (
     PIDController as PIDController,
     PolicyController as PolicyController,
     PolicyState as PolicyState,
+    StepDoublingController as StepDoublingController,
     StepFeatures as StepFeatures,
     StepInfo as StepInfo,
 )

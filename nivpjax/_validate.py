@@ -249,12 +249,18 @@ def error_stepper(stepper, controller, error_estimate):
     """The stepper wrapped in Richardson step doubling where the controller needs an error
     estimate the stepper does not embed."""
     if controller.needs_error_estimate:
+        if error_estimate == "embedded" and controller.step_doubling:
+            raise ValueError(
+                f"{type(controller).__name__} estimates by step doubling; "
+                "error_estimate='embedded' cannot be used with it."
+            )
         if error_estimate == "embedded" and stepper.error_order == 0:
             raise ValueError(
                 f"{type(stepper).__name__} has no embedded error estimate; use "
                 "error_estimate='richardson' or 'auto', or nivpjax.EmbeddedBETR."
             )
-        if error_estimate == "richardson" or stepper.error_order == 0:
+        doubling = error_estimate == "richardson" or controller.step_doubling
+        if doubling or stepper.error_order == 0:
             stepper = _memo("richardson", stepper, lambda: Richardson(stepper))
     return stepper
 

@@ -11,3 +11,4 @@ from .policy import (
     PolicyController as PolicyController,
     PolicyState as PolicyState,
 )
+from .step_doubling import StepDoublingController as StepDoublingController

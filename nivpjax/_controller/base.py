@@ -62,6 +62,12 @@ class AbstractController(eqx.Module):
     def needs_error_estimate(self) -> bool: ...
 
     @property
+    def step_doubling(self) -> bool:
+        """Whether the controller needs a step-doubling estimate (the stepper wrapped in
+        [`nivpjax.Richardson`][]) even where the stepper embeds one."""
+        return False
+
+    @property
     def requires_h0(self) -> bool:
         """Whether `solve` must be given `h0` (no step-size estimate of its own)."""
         return False
