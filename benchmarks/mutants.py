@@ -465,10 +465,10 @@ MUTANTS = [
     Mutant(
         "tangent_solve_sign",
         "gradients",
-        N + "base.py",
-        "x, _ = dense_solve(J, b)\n    return x",
-        "x, _ = dense_solve(J, -b)\n    return x",
-        "_tangent_solve solves g(x) = b: the implicit function theorem's linear system",
+        "nivpjax/_linear/dense.py",
+        "x, _ = _linalg.solve(J, b)\n        return x",
+        "x, _ = _linalg.solve(J, -b)\n        return x",
+        "DenseLU.tangent_solve solves g(x) = b: the implicit function theorem's linear system",
         (TN + "test_gradient_soc_sliding_matches_fd",),
     ),
     Mutant(
