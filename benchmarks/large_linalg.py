@@ -67,12 +67,12 @@ def chain(n, seed=0):
     return scene, jnp.zeros(2 * n), args
 
 
-def run(n, linear_solver, steps, t1=20.0):
-    """`(seconds per attempt, attempts, Newton iterations per attempt, solution)` of the
-    chain of `n` blocks with Bathe's scheme, the default controller and
-    `SemismoothNewton(linear_solver=...)`, capped at `steps` attempts."""
+def run(n, solver, steps, t1=20.0):
+    """`(seconds per attempt, attempts, iterations per attempt, solution)` of the chain of
+    `n` blocks with Bathe's scheme, the default controller and the nonlinear `solver`,
+    capped at `steps` attempts."""
     scene, x0, args = chain(n)
-    stepper = nj.Bathe(solver=nj.SemismoothNewton(linear_solver=linear_solver))
+    stepper = nj.Bathe(solver=solver)
 
     def go():
         # nj.solve compiles and caches its own program (no outer jit).
@@ -88,13 +88,12 @@ def run(n, linear_solver, steps, t1=20.0):
     return min(walls) / attempts, attempts, float(sol.n_iterations) / attempts, sol
 
 
-def stage_iterations(n, linear_solver, sol, samples=16):
+def stage_iterations(n, solver, sol, samples=16):
     """Mean Newton iterations and Krylov iterations per Newton iteration of backward
     Euler stages of the chain taken from `samples` accepted steps of `sol` (the same
     states and step sizes; the stages of Bathe's scheme are of this kind)."""
     _, _, args = chain(n)
     scene = chain(n)[0]
-    solver = nj.SemismoothNewton(linear_solver=linear_solver)
     k = int(sol.n_accepted)
     picks = np.linspace(1, k - 1, samples).astype(int)
 
@@ -118,9 +117,11 @@ def stage_iterations(n, linear_solver, sol, samples=16):
 
 
 SOLVERS = {
-    "dense": nj.DenseLU(),
-    "gmres": nj.Krylov(),
-    "bicgstab": nj.Krylov(method="bicgstab", max_steps=100),
+    "dense": nj.SemismoothNewton(linear_solver=nj.DenseLU()),
+    "gmres": nj.SemismoothNewton(linear_solver=nj.Krylov()),
+    "bicgstab": nj.SemismoothNewton(linear_solver=nj.Krylov(method="bicgstab", max_steps=100)),
+    # the VI method: no linear solves (its derivatives would use the default linear solver)
+    "vi": nj.FixedPointVI(),
 }
 
 
@@ -133,7 +134,7 @@ def main():
     ns = parser.parse_args()
     print(
         f"{'N':>6} {'states':>6} {'solver':>9} {'attempts':>8} {'ms/attempt':>10} "
-        f"{'newton/att':>10} {'newton/stage':>12} {'krylov/newton':>13} {'t reached':>9}"
+        f"{'iters/att':>10} {'iters/stage':>12} {'krylov/newton':>13} {'t reached':>9}"
     )
     costs = {name: [] for name in ns.solvers}
     for n in ns.sizes:

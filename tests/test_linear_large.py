@@ -204,8 +204,8 @@ def test_unconverged_tangent_solve_gives_nan_not_a_wrong_derivative():
 
 
 def test_auto_is_dense_up_to_its_threshold_and_krylov_above():
-    assert isinstance(nj.AutoLinear().resolve(256), nj.DenseLU)
-    assert isinstance(nj.AutoLinear().resolve(257), nj.Krylov)
+    assert isinstance(nj.AutoLinear().resolve(128), nj.DenseLU)
+    assert isinstance(nj.AutoLinear().resolve(129), nj.Krylov)
     assert isinstance(nj.AutoLinear(dense_max=10).resolve(2 * N), nj.Krylov)
     auto = nj.SemismoothNewton(rtol=1e-12, atol=1e-12)
     assert value(auto, P0).linear_iterations == 0  # 80 unknowns: dense

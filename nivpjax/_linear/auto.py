@@ -26,7 +26,7 @@ class AutoLinear(AbstractLinearSolver):
     - `krylov`: the [`nivpjax.Krylov`][] used above it.
     """
 
-    dense_max: int = eqx.field(static=True, default=256, converter=plain_int)
+    dense_max: int = eqx.field(static=True, default=128, converter=plain_int)
     krylov: Krylov = eqx.field(default_factory=Krylov)
 
     def __check_init__(self):
