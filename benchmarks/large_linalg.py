@@ -116,12 +116,23 @@ def stage_iterations(n, solver, sol, samples=16):
     return newton / samples, krylov / max(newton, 1)
 
 
+def _block_jacobi(n):
+    # Cells (u_i, v_i), coupled to their neighbours only: colours i mod 3.
+    cells = np.stack([np.arange(n), np.arange(n, 2 * n)], axis=1)
+    return nj.Krylov(preconditioner=nj.BlockJacobi(cells, np.arange(n) % 3))
+
+
 SOLVERS = {
-    "dense": nj.SemismoothNewton(linear_solver=nj.DenseLU()),
-    "gmres": nj.SemismoothNewton(linear_solver=nj.Krylov()),
-    "bicgstab": nj.SemismoothNewton(linear_solver=nj.Krylov(method="bicgstab", max_steps=100)),
+    "dense": lambda n: nj.SemismoothNewton(linear_solver=nj.DenseLU()),
+    "gmres": lambda n: nj.SemismoothNewton(linear_solver=nj.Krylov()),
+    "gmres-warm": lambda n: nj.SemismoothNewton(linear_solver=nj.Krylov(warm_start=True)),
+    "gmres-5": lambda n: nj.SemismoothNewton(linear_solver=nj.Krylov(restart=5, max_steps=40)),
+    "gmres-bj": lambda n: nj.SemismoothNewton(linear_solver=_block_jacobi(n)),
+    "bicgstab": lambda n: nj.SemismoothNewton(
+        linear_solver=nj.Krylov(method="bicgstab", max_steps=100)
+    ),
     # the VI method: no linear solves (its derivatives would use the default linear solver)
-    "vi": nj.FixedPointVI(),
+    "vi": lambda n: nj.FixedPointVI(),
 }
 
 
@@ -141,8 +152,9 @@ def main():
         for name in ns.solvers:
             if name == "dense" and n > ns.dense_max:
                 continue
-            per, attempts, newton, sol = run(n, SOLVERS[name], ns.steps)
-            stage_newton, krylov = stage_iterations(n, SOLVERS[name], sol)
+            solver = SOLVERS[name](n)
+            per, attempts, newton, sol = run(n, solver, ns.steps)
+            stage_newton, krylov = stage_iterations(n, solver, sol)
             costs[name].append((n, per))
             print(
                 f"{n:6d} {2 * n:6d} {name:>9} {attempts:8d} {1e3 * per:10.3f} {newton:10.2f} "

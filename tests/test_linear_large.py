@@ -15,7 +15,9 @@ N = 40  # blocks: 80 unknowns, above the unrolled LU, below AutoLinear's dense_m
 DENSE = nj.SemismoothNewton(rtol=1e-12, atol=1e-12, linear_solver=nj.DenseLU())
 KRYLOV = nj.SemismoothNewton(rtol=1e-12, atol=1e-12, linear_solver=nj.Krylov())
 BICG = nj.SemismoothNewton(
-    rtol=1e-12, atol=1e-12, linear_solver=nj.Krylov(method="bicgstab", max_steps=200)
+    rtol=1e-12,
+    atol=1e-12,
+    linear_solver=nj.Krylov(method="bicgstab", max_steps=200, warm_start=True),
 )
 # Cells (u_i, v_i); block i couples blocks i - 1 and i + 1 only, so colours i mod 3 read
 # the diagonal blocks exactly from 6 products.
@@ -121,6 +123,19 @@ def test_smooth_stage_matches_dense():
     np.testing.assert_allclose(sol.value, ref.value, rtol=0, atol=1e-10)
 
 
+def test_forcing_terms_tighten_into_superlinear_convergence():
+    # Eisenstat-Walker: loose linear solves first, then accurate ones, so the residual
+    # ratios of the last iterations fall far below any fixed forcing term (a fixed
+    # eta = 0.5 would leave them near 0.5).
+    sol = value(KRYLOV, P0)
+    k = int(sol.iterations)
+    history = np.asarray(sol.history[: k + 1])
+    ratios = history[1:] / history[:-1]
+    assert k >= 3
+    assert ratios[0] > 0.05  # the first solve is loose
+    assert ratios[-2] < 1e-2 and ratios[-1] < 1e-2
+
+
 def test_dense_gradient_matches_finite_differences(dense):
     # Anchors the comparison above to an independent reference (central differences;
     # the active set does not change within 1e-6).
@@ -194,7 +209,7 @@ def test_unconverged_tangent_solve_gives_nan_not_a_wrong_derivative():
     starved = nj.SemismoothNewton(
         rtol=1e-12,
         atol=1e-12,
-        # One GMRES cycle of 10 products (lineax's first step is a dummy): short of 1e-10.
+        # One GMRES cycle of 5 products (lineax's first step is a dummy): short of 1e-10.
         linear_solver=nj.Krylov(tangent_max_steps=2),
     )
     sol, grad = value_and_grad(starved, P0)
