@@ -136,13 +136,46 @@ SOLVERS = {
 }
 
 
+def full(n, names, t1=20.0, max_steps=100_000):
+    """Whole trajectories of the chain of `n` blocks to `t1` with each solver: wall time
+    (compile excluded), attempts, and the largest difference of the final state from the
+    first solver's."""
+    scene, x0, args = chain(n)
+    first = None
+    for name in names:
+        stepper = nj.Bathe(solver=SOLVERS[name](n))
+        # The final state only: buffers of every step would be max_steps x 2n.
+        go = lambda: scene.solve(
+            0.0, t1, x0, args, stepper=stepper, max_steps=max_steps, throw=False, saveat=nj.SaveAt()
+        )
+        t = time.perf_counter()
+        jax.block_until_ready(go())
+        compile_and_run = time.perf_counter() - t
+        t = time.perf_counter()
+        sol = jax.block_until_ready(go())
+        wall = time.perf_counter() - t
+        first = sol.y_final if first is None else first
+        attempts = int(sol.n_accepted + sol.n_rejected)
+        print(
+            f"full N={n} {name:>9}: {wall:.2f} s ({compile_and_run:.2f} s with compile), "
+            f"{attempts} attempts, {1e3 * wall / attempts:.3f} ms each, result {sol.result}, "
+            f"|y - y_first| = {float(jnp.max(jnp.abs(sol.y_final - first))):.2e}",
+            flush=True,
+        )
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--sizes", type=int, nargs="+", default=[40, 100, 200, 400, 1000])
     parser.add_argument("--steps", type=int, default=300)
     parser.add_argument("--dense-max", type=int, default=400, help="largest N solved densely")
     parser.add_argument("--solvers", nargs="+", default=["dense", "gmres"], choices=SOLVERS)
+    parser.add_argument("--full", type=int, nargs="*", default=[], help="whole trajectories")
     ns = parser.parse_args()
+    for n in ns.full:
+        full(n, ns.solvers)
+    if ns.full:
+        return
     print(
         f"{'N':>6} {'states':>6} {'solver':>9} {'attempts':>8} {'ms/attempt':>10} "
         f"{'iters/att':>10} {'iters/stage':>12} {'krylov/newton':>13} {'t reached':>9}"
