@@ -1,6 +1,6 @@
 """Linear algebra of large stages: a driven spring-block (Burridge-Knopoff) chain with
 slip-weakening friction on every block, solved through the Scene API with the default
-stepper (Bathe) and controller at rtol 1e-4, dense against matrix-free semismooth Newton.
+stepper (Bathe) and controller (PID, rtol 1e-3), dense against matrix-free semismooth Newton.
 
 Reports, per chain length N (2N states): attempts, wall time per attempt, Newton
 iterations per attempt and Krylov iterations per Newton iteration, and the exponent of the
