@@ -41,9 +41,9 @@ class BlockJacobi(AbstractPreconditioner):
     **Arguments:**
 
     - `blocks`: integer array of shape `(number of blocks, k)`: the unknowns of each
-      block, every unknown in exactly one block; `None`: each unknown its own block.
+      block, every unknown in exactly one block; by default each unknown is its own block.
     - `colors`: integer array of shape `(number of blocks,)`, a colour per block (see
-      above); `None`: all distinct.
+      above); by default all distinct.
     - `batch`: products evaluated together (vectorised) when probing.
     """
 
