@@ -472,6 +472,36 @@ MUTANTS = [
         (TN + "test_gradient_soc_sliding_matches_fd",),
     ),
     Mutant(
+        "krylov_tangent_nan_mask_dropped",
+        "gradients",
+        "nivpjax/_linear/krylov.py",
+        "return jnp.where(lax.stop_gradient(converged), precondition(z), jnp.nan)",
+        "return precondition(z)",
+        "Krylov's docstring: an implicit-function solve short of its tolerance gives NaN, "
+        "never a wrong finite derivative",
+        (
+            "tests/test_linear_large.py::test_unconverged_tangent_solve_gives_nan_not_a_wrong_derivative",
+        ),
+    ),
+    Mutant(
+        "krylov_forcing_frozen",
+        "nonlinear",
+        "nivpjax/_linear/krylov.py",
+        "eta = self.gamma * ratio**self.alpha",
+        "eta = self.gamma * ratio**0",
+        "Krylov's docstring: Eisenstat-Walker forcing terms tighten as the residual falls",
+        ("tests/test_linear_large.py::test_forcing_terms_tighten_into_superlinear_convergence",),
+    ),
+    Mutant(
+        "krylov_cauchy_test_kept",
+        "nonlinear",
+        "nivpjax/_linear/krylov.py",
+        "c = 1.0 / jnp.sqrt(jnp.finfo(b.dtype).eps)",
+        "c = 1.0",
+        "Krylov._solve's comment: lineax's test on the last update costs GMRES a whole cycle",
+        ("tests/test_linear_large.py::test_an_exact_preconditioner_solves_in_one_krylov_cycle",),
+    ),
+    Mutant(
         "tangent_residual_dropped",
         "gradients",
         N + "base.py",
