@@ -116,6 +116,17 @@ def test_matrix_free_matches_dense_values_and_gradients(dense, name, friction):
     np.testing.assert_allclose(grad, ref_grad, rtol=1e-7, atol=1e-9)
 
 
+def test_vi_method_derivatives_through_krylov_match_dense(dense):
+    # FixedPointVI needs no linear solve to iterate; its implicit-function derivatives go
+    # through its linear_solver (matrix-free here).
+    vi = nj.FixedPointVI(rtol=1e-12, atol=1e-12, max_steps=5000, linear_solver=nj.Krylov())
+    ref, ref_grad = dense[True]
+    sol, grad = value_and_grad(vi, P0)
+    assert sol.result == nj.RESULTS.successful
+    np.testing.assert_allclose(sol.value, ref.value, rtol=0, atol=1e-10)
+    np.testing.assert_allclose(grad, ref_grad, rtol=1e-7, atol=1e-9)
+
+
 def test_smooth_stage_matches_dense():
     # No projector: a plain implicit step.
     ref, sol = value(DENSE, P0, None), value(KRYLOV, P0, None)
