@@ -18,6 +18,14 @@ from ._controller import (
     StepInfo as StepInfo,
 )
 from ._fit import FitResult as FitResult, fit as fit
+from ._linear import (
+    AbstractLinearSolver as AbstractLinearSolver,
+    AbstractPreconditioner as AbstractPreconditioner,
+    AutoLinear as AutoLinear,
+    BlockJacobi as BlockJacobi,
+    DenseLU as DenseLU,
+    Krylov as Krylov,
+)
 from ._model import Model as Model
 from ._nonlinear import (
     AbstractNonlinearSolver as AbstractNonlinearSolver,

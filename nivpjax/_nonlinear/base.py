@@ -11,7 +11,7 @@ import numpy as np
 from jax import lax
 from jaxtyping import Array, Float, Int
 
-from .. import _linalg
+from .._linear import AbstractLinearSolver
 from .._results import RESULTS
 from .._tangent import tangent_only
 
@@ -39,6 +39,8 @@ class NonlinearSolution(eqx.Module):
     - `history`: a residual norm after each iteration, entries past `iterations` NaN
       ("not reached"). Semismooth Newton records $\\|G\\|_\\infty$ (entry 0: the initial
       guess); the VI method records its natural residual (entry 0 is NaN).
+    - `linear_iterations`: Krylov iterations summed over the Newton iterations (0 for
+      dense solves and the VI method).
     """
 
     value: Float[Array, " n"]
@@ -46,6 +48,7 @@ class NonlinearSolution(eqx.Module):
     residual_norm: Float[Array, ""]
     result: RESULTS
     history: Float[Array, " k"]
+    linear_iterations: Int[Array, ""] = eqx.field(default_factory=lambda: jnp.zeros((), jnp.int32))
 
 
 def natural_map(residual: Residual, project: Project, rho) -> Callable[[Array], Array]:
@@ -69,23 +72,6 @@ def effective_tolerances(rtol, atol, dtype):
     return max(float(rtol), 8 * eps), max(float(atol), 8 * eps)
 
 
-def dense_solve(J, b):
-    """Dense LU solve (see `nivpjax._linalg.solve`); returns the solution and whether it is
-    usable."""
-    return _linalg.solve(J, b)
-
-
-def _tangent_solve(g, b):
-    # g is the linearisation of G at the solution (its generalised Jacobian, with the
-    # projectors' custom-JVP elements); solve g(x) = b densely. g is linear, so its
-    # Jacobian is the same at every point: taken at zero, `b` visibly enters through the
-    # solve alone, linearly, as reverse mode's transposition in `b` needs. (Taking it at
-    # `b` changes nothing: JAX drops the unused primal g(b); an equivalent mutant.)
-    J = jax.jacfwd(g)(jnp.zeros_like(b))
-    x, _ = dense_solve(J, b)
-    return x
-
-
 class AbstractNonlinearSolver(eqx.Module):
     """Solves the variational inequality of one implicit stage: find $y$ with
     $y = P(y - \\rho R(y))$.
@@ -93,12 +79,14 @@ class AbstractNonlinearSolver(eqx.Module):
     Subclasses implement `_iterate`, a `lax.while_loop` returning the value and float
     diagnostics. `solve` wraps it in `jax.lax.custom_root`, so the returned value is
     differentiated by the implicit function theorem on $G(y) = 0$ (with the generalised
-    Jacobian the projectors' custom JVP rules select), never by unrolling the iteration.
+    Jacobian the projectors' custom JVP rules select), never by unrolling the iteration;
+    `linear_solver` solves that linear system (see [`nivpjax.AutoLinear`][]).
     """
 
     rtol: eqx.AbstractVar[float]
     atol: eqx.AbstractVar[float]
     max_steps: eqx.AbstractVar[int]
+    linear_solver: eqx.AbstractVar[AbstractLinearSolver]
 
     def __check_init__(self):
         if (
@@ -107,6 +95,11 @@ class AbstractNonlinearSolver(eqx.Module):
             or (self.max_steps < 1)
         ):
             raise ValueError(f"`max_steps` must be a positive int, got {self.max_steps!r}.")
+        if not isinstance(self.linear_solver, AbstractLinearSolver):
+            raise TypeError(
+                "`linear_solver` must be an nivpjax.AbstractLinearSolver (DenseLU, Krylov, "
+                f"AutoLinear), got {self.linear_solver!r}."
+            )
         for name in ("rtol", "atol"):
             value = getattr(self, name)
             if isinstance(value, jax.core.Tracer):
@@ -119,7 +112,8 @@ class AbstractNonlinearSolver(eqx.Module):
 
     @abc.abstractmethod
     def _iterate(self, residual: Residual, project: Project, rho, y0, rtol, atol):
-        """Return `(y, (iterations, history))` with float diagnostics."""
+        """Return `(y, (iterations, history, linear_iterations))` with float
+        diagnostics."""
 
     def solve(
         self,
@@ -157,7 +151,10 @@ class AbstractNonlinearSolver(eqx.Module):
             # so the iteration itself is never differentiated.
             return self._iterate(residual, project, rho, guess, rtol, atol)
 
-        y, (iterations, history) = lax.custom_root(G, y0, _solve, _tangent_solve, has_aux=True)
+        linear = self.linear_solver.resolve(y0.shape[0])
+        y, (iterations, history, linear_iterations) = lax.custom_root(
+            G, y0, _solve, linear.tangent_solve, has_aux=True
+        )
         # On components the projector moves, return the projected point P(y - rho R(y)):
         # it lies in the set (exactly, up to the projection's rounding on curved
         # boundaries; the iterate only to tolerance), within |G(y)| of y,
@@ -192,6 +189,7 @@ class AbstractNonlinearSolver(eqx.Module):
             residual_norm=norm,
             result=result,
             history=history,
+            linear_iterations=linear_iterations.astype(jnp.int32),
         )
 
 

@@ -6,6 +6,7 @@ import jax.numpy as jnp
 from jax import lax
 
 from .._custom_types import plain_int
+from .._linear import AbstractLinearSolver, AutoLinear
 from .base import AbstractNonlinearSolver, init_history, scaled_error
 
 
@@ -41,6 +42,8 @@ class FixedPointVI(AbstractNonlinearSolver):
     - `alpha0`: initial $\alpha$; `alpha_max`: its cap; `nu`: acceptance threshold on $L$;
       `kappa`: contraction required of a projection step; `grow`, `shrink`: adaptation
       factors.
+    - `linear_solver`: solves the implicit-function system of derivatives (the
+      iteration itself needs none); default [`nivpjax.AutoLinear`][].
     """
 
     rtol: float = 1e-8
@@ -52,6 +55,7 @@ class FixedPointVI(AbstractNonlinearSolver):
     kappa: float = 0.7
     grow: float = 1.5
     shrink: float = 0.3
+    linear_solver: AbstractLinearSolver = eqx.field(default_factory=AutoLinear)
 
     def _iterate(self, residual, project, rho, y0, rtol, atol):
         tiny = jnp.finfo(y0.dtype).tiny
@@ -113,4 +117,4 @@ class FixedPointVI(AbstractNonlinearSolver):
         history = init_history(self.max_steps, y0.dtype, jnp.nan)
         carry = (y0, R0, y_bar0, R_bar0, alpha, jnp.array(0), history, jnp.array(False))
         y, *_, k, history, _ = lax.while_loop(cond, body, carry)
-        return y, (k.astype(y.dtype), history)
+        return y, (k.astype(y.dtype), history, jnp.zeros((), y.dtype))

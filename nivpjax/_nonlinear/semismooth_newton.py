@@ -1,22 +1,25 @@
 """Semismooth Newton with a watchdog Armijo line search."""
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 from jax import lax
 
 from .._custom_types import plain_int
-from .base import AbstractNonlinearSolver, dense_solve, init_history, natural_map, scaled_error
+from .._linear import AbstractLinearSolver, AutoLinear
+from .base import AbstractNonlinearSolver, init_history, natural_map, scaled_error
 
 
 class SemismoothNewton(AbstractNonlinearSolver):
     r"""Semismooth Newton on $G(y) = y - P(y - \rho R(y))$.
 
-    Each iteration forms the generalised Jacobian $I - D(I - \rho J_R)$ by forward-mode
-    differentiation of $G$ (the projectors' custom JVPs supply $D$), solves densely (LU
-    with partial pivoting: unrolled up to 8 unknowns, lineax beyond), and globalises with a
-    backtracking Armijo line search on the merit $\tfrac12|G|^2$: accept $\alpha$ when
-    $\tfrac12|G(y + \alpha d)|^2 \le (1 - 2\sigma\alpha)\tfrac12|G(y)|^2$.
+    Each iteration solves $G'(y)\,d = -G(y)$ with $G'$ the generalised Jacobian
+    $I - D(I - \rho J_R)$ (the projectors' custom JVPs supply $D$), by `linear_solver`:
+    by default ([`nivpjax.AutoLinear`][]) the Jacobian formed by forward-mode
+    differentiation and solved densely (LU with partial pivoting: unrolled up to 8
+    unknowns, lineax beyond) for small systems, and matrix-free Krylov solves with
+    Eisenstat-Walker forcing terms ([`nivpjax.Krylov`][]) for large ones. It globalises
+    with a backtracking Armijo line search on the merit $\tfrac12|G|^2$: accept $\alpha$
+    when $\tfrac12|G(y + \alpha d)|^2 \le (1 - 2\sigma\alpha)\tfrac12|G(y)|^2$.
 
     The first `full_steps` iterations take the full Newton step whenever it is finite
     (a watchdog): a monotone line search stalls on stiffly coupled switching systems whose
@@ -31,6 +34,8 @@ class SemismoothNewton(AbstractNonlinearSolver):
     - `max_steps`: cap on Newton iterations.
     - `full_steps`: number of initial iterations without line search.
     - `sigma`, `beta`, `max_backtracks`: Armijo constant, backtracking factor and cap.
+    - `linear_solver`: an [`nivpjax.AbstractLinearSolver`][] for the Newton systems and
+      the implicit-function solve of derivatives (default [`nivpjax.AutoLinear`][]).
     """
 
     rtol: float = 1e-8
@@ -40,16 +45,18 @@ class SemismoothNewton(AbstractNonlinearSolver):
     sigma: float = 1e-4
     beta: float = 0.5
     max_backtracks: int = eqx.field(static=True, default=30)
+    linear_solver: AbstractLinearSolver = eqx.field(default_factory=AutoLinear)
 
     def _iterate(self, residual, project, rho, y0, rtol, atol):
         G = natural_map(residual, project, rho)
         G0 = G(y0)
+        linear = self.linear_solver.resolve(y0.shape[0])
 
         def merit(g):
             return 0.5 * jnp.sum(g**2)
 
         def cond(carry):
-            y, g, k, history = carry
+            y, g, k, history, _, _ = carry
             return (
                 (k < self.max_steps)
                 # At least one iteration: with a tiny step the whole update of the stage can
@@ -60,9 +67,8 @@ class SemismoothNewton(AbstractNonlinearSolver):
             )
 
         def body(carry):
-            y, g, k, history = carry
-            J = jax.jacfwd(G)(y)
-            d, ok = dense_solve(J, -g)
+            y, g, k, history, state, linear_its = carry
+            d, ok, its, state = linear.direction(G, y, g, atol + rtol * jnp.abs(y), state)
             d = jnp.where(ok, d, -g)
             m0 = merit(g)
             watchdog = k < self.full_steps
@@ -85,8 +91,9 @@ class SemismoothNewton(AbstractNonlinearSolver):
             _, y_new, g_new, _ = lax.while_loop(ls_cond, ls_body, (one, y1, G(y1), 0))
             k = k + 1
             history = history.at[k].set(jnp.max(jnp.abs(g_new), initial=0.0))
-            return y_new, g_new, k, history
+            return y_new, g_new, k, history, state, linear_its + its
 
         history = init_history(self.max_steps, y0.dtype, jnp.max(jnp.abs(G0), initial=0.0))
-        y, _, k, history = lax.while_loop(cond, body, (y0, G0, jnp.array(0), history))
-        return y, (k.astype(y.dtype), history)
+        carry = (y0, G0, jnp.array(0), history, linear.init(y0), jnp.zeros((), jnp.int32))
+        y, _, k, history, _, linear_its = lax.while_loop(cond, body, carry)
+        return y, (k.astype(y.dtype), history, linear_its.astype(y.dtype))
