@@ -1026,6 +1026,16 @@ MUTANTS = [
         ),
     ),
     Mutant(
+        "relay_far_branch_unnormalised",
+        "gradients",
+        P + "located.py",
+        "far = self.projector(w0 + reach * jump / jnp.where(scale > 0, scale, 1.0), ctx)",
+        "far = self.projector(w0 + 1e6 * jump, ctx)",
+        "EventLocated.switch_shift's comment: the far branch is read along the jump's "
+        "direction whatever its size (a selection landed 3.5e-7 off its face: 0.76 off)",
+        (TS + "test_relay_crossing_carries_the_saltation_term",),
+    ),
+    Mutant(
         "interpolation_without_saltation_shift",
         "gradients",
         "nivpjax/_loop.py",
