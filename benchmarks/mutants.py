@@ -426,8 +426,8 @@ MUTANTS = [
         "solve_returns_raw_iterate",
         "nonlinear",
         N + "base.py",
-        "value = jnp.where(lax.stop_gradient((p != z) | outside), p, y)",
-        "value = y",
+        "return jnp.where(lax.stop_gradient((p != z) | outside), p, y), p",
+        "return y, p",
         "NonlinearSolution.value: constrained components lie exactly in their sets, "
         "converged or not (issue 29's survivor)",
         (TN + "test_returned_multipliers_lie_exactly_in_their_sets",),
@@ -436,8 +436,8 @@ MUTANTS = [
         "solve_projects_free_components",
         "nonlinear",
         N + "base.py",
-        "value = jnp.where(lax.stop_gradient((p != z) | outside), p, y)",
-        "value = p",
+        "return jnp.where(lax.stop_gradient((p != z) | outside), p, y), p",
+        "return p, p",
         "the comment: free components keep the iterate, which satisfies its own equations "
         "more exactly",
         (
@@ -1027,6 +1027,43 @@ MUTANTS = [
         "EmbeddedBETR's docstring: both stages return a face that holds the row at both "
         "ends of a step (the sweeping process: one step over a departure and return)",
         ("tests/test_interpolation_order.py::test_sweeping_teval_as_right_as_the_steps",),
+    ),
+    Mutant(
+        "coulomb_transient_keeps_stage_derivative",
+        "gradients",
+        P + "coulomb.py",
+        "end = jnp.where(transient, -(force - c * jnp.sign(force)) * delta - own, 0.0)",
+        "end = jnp.where(transient, -(force - c * jnp.sign(force)) * delta, 0.0)",
+        "CoulombFriction.switch_shift's docstring: a transient landing's end velocity takes "
+        "the post-reversal derivative in place of the stage's own, whichever branch the "
+        "stage took (a slip landing 1e-19 short kept its own: 0.14 off)",
+        (
+            "tests/test_reversal_gradients.py::"
+            "test_slider_derivative_does_not_depend_on_event_margin",
+        ),
+    ),
+    Mutant(
+        "switch_branch_read_at_iterate",
+        "gradients",
+        "nivpjax/_model.py",
+        "return reaction(y, y_base + switch(landed)[0], tangent)",
+        "return reaction(y, y_base + switch(y)[0], tangent)",
+        "solve_stage's comment: the switch's branch is read at the value the solver returns, "
+        "not at the iterate, which may lie on the other side of a switch it landed on",
+        (
+            "tests/test_reversal_gradients.py::"
+            "test_step_ending_anywhere_near_reversal_gives_one_derivative[Trapezoidal]",
+        ),
+    ),
+    Mutant(
+        "relay_far_branch_unnormalised",
+        "gradients",
+        P + "located.py",
+        "far = self.projector(w0 + reach * jump / jnp.where(scale > 0, scale, 1.0), ctx)",
+        "far = self.projector(w0 + 1e6 * jump, ctx)",
+        "EventLocated.switch_shift's comment: the far branch is read along the jump's "
+        "direction whatever its size (a selection landed 3.5e-7 off its face: 0.76 off)",
+        (TS + "test_relay_crossing_carries_the_saltation_term",),
     ),
     Mutant(
         "interpolation_without_saltation_shift",

@@ -192,9 +192,16 @@ class Model(eqx.Module):
         def residual(y, tangent=False):
             # The switch's base shift is zero in value and in its derivative with respect
             # to the iterate (it scales d tau, which depends on the stage start only): the
-            # iteration does without it, the linearisation at the solution carries it.
-            base = y_base if (switch is None or not tangent) else y_base + switch(y)[0]
-            return reaction(y, base, tangent)
+            # iteration does without it, the linearisation at the solution carries it. Its
+            # branch is read at the value the solver returns (as the end shift's is), not
+            # at the iterate, which may lie on the other side of a switch it landed on.
+            if switch is None or not tangent:
+                return reaction(y, y_base, tangent)
+            landed = solver.returned_point(reaction_at_base, project, rho, y)
+            return reaction(y, y_base + switch(landed)[0], tangent)
+
+        def reaction_at_base(y):
+            return reaction(y, y_base)
 
         alg_rho = self.tau / h_eff
         if self.equation_rows is not None:

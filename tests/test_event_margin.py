@@ -29,7 +29,8 @@ def test_default_margin_follows_rtol_and_an_explicit_one_is_kept():
     assert float(event_margin(None, 1e-6)) == 1e-8  # unchanged down to rtol 1e-6
     assert float(event_margin(None, 1e-8)) == pytest.approx(1e-10)
     assert event_margin(2e-7, 1e-8) == 2e-7
-    # Not the default (a friction-reversal derivative at rtol 1e-8 came out 14% off).
+    # Not the default (a friction-reversal derivative at rtol 1e-8 came out 14% off with
+    # it, fixed since: tests/test_reversal_gradients.py).
     assert nj.PIDController().event_margin == 1e-8
 
 

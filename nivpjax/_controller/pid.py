@@ -60,8 +60,9 @@ class PIDController(AbstractController):
       \text{rtol})$, so that the time an impact is applied early does not floor the
       error below rtol $10^{-6}$ (a bouncing ball: $1.1 \cdot 10^{-7}$ at every rtol
       with the default, $8 \cdot 10^{-10}$ at rtol $10^{-8}$). Not the default: with it a
-      friction-reversal derivative at rtol $10^{-8}$ came out 14% off
-      (`test_slider_reversals_converge_to_exact_derivative`), a cause not yet found.
+      friction-reversal derivative at rtol $10^{-8}$ came out 14% off, a step landing
+      within round-off of the reversal losing its term (fixed since:
+      `tests/test_reversal_gradients.py`).
     """
 
     rtol: FloatScalar = eqx.field(default=1e-3, converter=runtime_float)

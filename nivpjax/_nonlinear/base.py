@@ -115,6 +115,17 @@ class AbstractNonlinearSolver(eqx.Module):
         """Return `(y, (iterations, history, linear_iterations))` with float
         diagnostics."""
 
+    def returned_point(self, residual: Residual, project: Project, rho, y):
+        r"""The value `solve` returns for the iterate `y` (no gradient): the projection
+        $P(y - \rho R(y))$ on the components it moves, `y` elsewhere. A linearisation at
+        the iterate that reads the branch of a switch (`Model.solve_stage`) reads it
+        there, where the returned value lies: the two differ by the solver's tolerance,
+        and a velocity within it of a reversal could lie on one side for the one and on
+        the other side for the other."""
+        y = lax.stop_gradient(y)
+        rho = jnp.broadcast_to(jnp.asarray(rho, y.dtype), y.shape)
+        return lax.stop_gradient(_returned(project, rho, y, y - rho * residual(y))[0])
+
     def solve(
         self,
         residual: Residual,
@@ -169,10 +180,8 @@ class AbstractNonlinearSolver(eqx.Module):
             z = y - rho * residual(y)
         else:
             z = y - rho * (residual(y) + tangent_only(lambda v: residual_t(v) - residual(v), y))
-        p = project(z, y, rho)
+        value, p = _returned(project, rho, y, z)
         G_y = y - p
-        outside = project(y, y, rho) != y
-        value = jnp.where(lax.stop_gradient((p != z) | outside), p, y)
         y_nd = lax.stop_gradient(y)
         G_final = lax.stop_gradient(G_y)
         norm = jnp.max(jnp.abs(G_final), initial=0.0)
@@ -191,6 +200,13 @@ class AbstractNonlinearSolver(eqx.Module):
             history=history,
             linear_iterations=linear_iterations.astype(jnp.int32),
         )
+
+
+def _returned(project: Project, rho, y, z):
+    # The value returned for the iterate `y` and `z = y - rho R(y)`, and P(z).
+    p = project(z, y, rho)
+    outside = project(y, y, rho) != y
+    return jnp.where(lax.stop_gradient((p != z) | outside), p, y), p
 
 
 def init_history(max_steps, dtype, first):

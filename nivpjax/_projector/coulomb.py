@@ -1,6 +1,7 @@
 """Coulomb friction on a velocity component, as a proximal map (no multiplier state)."""
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -8,6 +9,15 @@ from .ball import project_ball
 from .base import AbstractProjector, Bound, ProjectionContext, resolve, switch_delay
 from .box import clip
 from .predict import secant_crossing
+
+
+def at_zero(v):
+    r"""Which components of a velocity vector are zero up to round-off (a stuck velocity,
+    or one that a step landed on a reversal with): $|v_i| \le 64\,\epsilon\,(1 +
+    \max_j |v_j|)$. A function of the velocity alone, so that the stage that ends at a
+    velocity and the stage that starts there classify it alike."""
+    tol = 64 * jnp.finfo(v.dtype).eps * (1.0 + jnp.max(jnp.abs(v), initial=0.0))
+    return jnp.abs(v) <= tol
 
 
 class CoulombFriction(AbstractProjector):
@@ -113,16 +123,22 @@ class CoulombFriction(AbstractProjector):
         - The velocity changes sign between the stage's start and its solution: the jump
           $c(\operatorname{sign} v^+ - \operatorname{sign} v^-)\,\delta\tau$ shifts the
           stage's base point.
-        - The stage ends stuck although the applied force exceeds the bound
-          ($|F| > c$, opposing $v_0$): the block sticks for this stage only and slips back
-          in the next one, whose start no longer carries $d\tau$ (a stuck velocity has no
-          sensitivity). The stage's result moves back along the post-reversal flow,
-          $-(F - c\,\operatorname{sign} F)\,\delta\tau$.
+        - The stage ends at zero velocity (`at_zero`) although the applied force exceeds
+          the bound ($|F| > c$, opposing $v_0$): the block reverses there, and the next
+          stage, which starts at zero, carries no $d\tau$. The end's velocity takes the
+          post-reversal derivative $-(F - c\,\operatorname{sign} F)\,\delta\tau$ in
+          place of the stage's own, whichever branch the stage took: stuck (no
+          sensitivity of its own) or slipping to a velocity within round-off of zero
+          (the pre-reversal one; a step that ended 1e-19 short of a reversal lost its
+          jump entirely, measured: $d v(T)/d\mu$ 20% off).
 
-        Stick to slip at a breakaway and slip to a lasting stick carry no term: the force
-        is continuous at a breakaway, and a lasting stick has no sensitivity to its
-        start. Isotropic friction: none (a 2-D velocity passes through zero only on a set
-        of measure zero)."""
+        Which side of the reversal a velocity lies on is decided by `at_zero` on the
+        velocity alone, so that the stage ending at a velocity and the stage starting
+        there agree: the jump is applied once, by the one or by the other. Stick to slip
+        at a breakaway and slip to a lasting stick carry no term: the force is continuous
+        at a breakaway, and a lasting stick has no sensitivity to its start. Isotropic
+        friction: none (a 2-D velocity passes through zero only on a set of measure
+        zero)."""
         v0, v1 = ctx.restrict(ctx.y_prev), ctx.restrict(ctx.y_iter)
         dtype = v0.dtype
         zero = jnp.zeros_like(v0)
@@ -131,16 +147,16 @@ class CoulombFriction(AbstractProjector):
         start = eqx.tree_at(lambda c: c.y_iter, ctx, ctx.y_prev)
         c = jnp.broadcast_to(jnp.maximum(resolve(self.bound, start, dtype), 0.0), v0.shape)
         force = ctx.restrict(ctx.rate)
-        tol = 64 * jnp.finfo(dtype).eps * (1.0 + jnp.max(jnp.abs(v0), initial=0.0))
-        slipping = jnp.abs(v0) > tol
-        reversal = slipping & (v0 * v1 < 0) & (jnp.abs(v1) > tol)
-        transient = slipping & (jnp.abs(v1) <= tol) & (force * v0 < 0) & (jnp.abs(force) > c)
+        slipping, stopped = ~at_zero(v0), at_zero(v1)
+        reversal = slipping & (v0 * v1 < 0) & ~stopped
+        transient = slipping & stopped & (force * v0 < 0) & (jnp.abs(force) > c)
         delta = switch_delay(v0, force - c * jnp.sign(v0), reversal | transient)
-        # A transient stick's base shift is the jump to the reversed slip (the stuck stage
-        # ignores it; a multistage scheme reads it for its earlier points).
+        # A transient stick's base shift is the jump to the reversed slip (a multistage
+        # scheme reads it for its earlier points; the end replaces the stage's derivative).
         after = jnp.where(reversal, jnp.sign(v1), jnp.sign(force))
         base = jnp.where(reversal | transient, c * (after - jnp.sign(v0)) * delta, 0.0)
-        end = jnp.where(transient, -(force - c * jnp.sign(force)) * delta, 0.0)
+        own = v1 - jax.lax.stop_gradient(v1)
+        end = jnp.where(transient, -(force - c * jnp.sign(force)) * delta - own, 0.0)
         return base, end, jnp.any(reversal | transient)
 
     def __call__(self, z, ctx: ProjectionContext):
