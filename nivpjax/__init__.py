@@ -66,6 +66,7 @@ from ._stepper import (
     BackwardEuler as BackwardEuler,
     Bathe as Bathe,
     EmbeddedBETR as EmbeddedBETR,
+    EventDriven as EventDriven,
     Richardson as Richardson,
     StepOutput as StepOutput,
     Theta as Theta,

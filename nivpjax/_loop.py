@@ -223,11 +223,7 @@ def attempt(
     h_try = jax.lax.stop_gradient(h_try)
     out = stepper.step(model, s.t, h_try, s.y, args)
     y_error = jnp.zeros_like(out.y1) if out.y_error is None else out.y_error
-    violation = model.violation(s.t + h_try, h_try, s.y, out.y1, args)
-    next_event = model.next_event(s.t + h_try, h_try, s.y, out.y1, args)
-    exit_violation, exit_time = model.held_exit(s.t + h_try, h_try, s.y, out.y1, args)
-    violation = jnp.maximum(violation, exit_violation)
-    next_event = jnp.minimum(next_event, exit_time)
+    violation, next_event = _events(model, stepper, s, h_try, out, args)
     info = StepInfo(
         t0=s.t,
         h=h_try,
@@ -254,7 +250,13 @@ def attempt(
         h_next = jnp.minimum(h_next, h_max)
     h_next = jax.lax.stop_gradient(h_next)
 
-    t_new = jnp.where(accept, jnp.where(last, t1, s.t + h_try), s.t)
+    h_step = h_try
+    if out.h_taken is not None:
+        # A stepper that ended the step at an event it located: the state is there.
+        cut = out.h_taken < h_try
+        last = last & ~cut
+        h_step = jnp.where(cut, jax.lax.stop_gradient(out.h_taken), h_try)
+    t_new = jnp.where(accept, jnp.where(last, t1, s.t + h_step), s.t)
     y_new = jnp.where(accept, out.y1, s.y)
     idx = s.n_accepted + 1
 
@@ -285,7 +287,7 @@ def attempt(
         result=result,
         ts=put(s.ts, t_new),
         ys=put(s.ys, y_new),
-        hs=put(s.hs, h_try),
+        hs=put(s.hs, h_step),
         multipliers=put(s.multipliers, out.multipliers),
         iterations=put(s.iterations, out.stats.iterations.astype(jnp.int32)),
         residual_norms=put(s.residual_norms, out.stats.residual_norm),
@@ -293,6 +295,19 @@ def attempt(
         attempts=attempts,
         y_eval=y_eval,
     )
+
+
+def _events(model, stepper, s, h_try, out, args):
+    # `(violation, next_event)` of an attempt for the controller: a constraint crossed
+    # without being enforced, and the predicted time to the next event (held exits
+    # included); none for a stepper that locates events itself.
+    if stepper.locates_events:
+        zero = jnp.zeros((), out.y1.dtype)
+        return zero, jnp.full((), jnp.inf, out.y1.dtype)
+    violation = model.violation(s.t + h_try, h_try, s.y, out.y1, args)
+    next_event = model.next_event(s.t + h_try, h_try, s.y, out.y1, args)
+    exit_violation, exit_time = model.held_exit(s.t + h_try, h_try, s.y, out.y1, args)
+    return jnp.maximum(violation, exit_violation), jnp.minimum(next_event, exit_time)
 
 
 def _fill_eval(model, t_eval, ta, ya, tb, yb, final, args, y_eval):

@@ -147,6 +147,7 @@ def solve(
         tau=float(tau_arr) if tau_arr.shape == () else jnp.asarray(tau_arr, dtype),
         equation_rows=equation_rows,
     )
+    stepper.validate_model(model)
     traced = v.is_traced((y0, t0, t1, args, t_eval, h0))
     call = _solve_jit.prepare(
         model,

@@ -1,0 +1,196 @@
+r"""The event-driven stepper: an explicit Runge–Kutta pair on the frozen smooth system,
+cut at the first event located on its dense output."""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._model import Model
+from .._nonlinear import AbstractNonlinearSolver
+from .._results import RESULTS
+from .._solution import StepStats
+from .base import AbstractStepper, StepOutput, default_solver, stats_of
+from .event_locate import SAMPLES, first_bracket, illinois
+from .frozen import algebraic_values, decide_face, frozen_rate, switching
+from .rk_tableau import DOPRI5, ExplicitPair
+
+
+# The projected problem that decides the face after an event is a backward Euler stage of
+# this fraction of the attempted step from the event: long enough that the event's
+# location error (round-off) does not decide it, short enough that the flow does not
+# reach another event.
+PROBE = 1e-3
+
+
+def check_model(model: Model) -> None:
+    """The models the event-driven stepper freezes: set-valued laws on algebraic rows
+    only (relays, saturations, diodes written on multipliers). Raises `ValueError` before
+    any work otherwise."""
+    n = model.algebraic.shape[0]
+    if model.has_impulses:
+        raise ValueError(
+            "`EventDriven` does not handle impacts yet (a projector with impulses); use "
+            "`Bathe` or another time-stepping stepper."
+        )
+    on_differential = np.asarray(model.projector.acts_on(n), bool) & ~np.asarray(
+        model.algebraic, bool
+    )
+    if on_differential.any():
+        rows = np.flatnonzero(on_differential).tolist()
+        raise ValueError(
+            f"`EventDriven` freezes set-valued laws on algebraic rows only; the projector "
+            f"acts on differential rows {rows} (friction as a proximal map, a constraint "
+            "on a state). Write the law on a multiplier, or use `Bathe`."
+        )
+
+
+class EventDriven(AbstractStepper):
+    r"""An event-driven stepper: high order between events, each event located.
+
+    Between two events the model is smooth once the face of every set-valued law is held
+    fixed (see `nivpjax._stepper.frozen`): a relay at $w = \pm 1$ or sliding with its
+    equivalent control, a saturation saturated or linear. Each step
+
+    1. decides the face at its start from the state (a state on a switching surface
+       takes the side the flow goes to);
+    2. integrates the frozen system with an explicit Runge–Kutta pair (`tableau`,
+       default Dormand–Prince 5(4)) and its embedded estimate (error order 5);
+    3. samples the switching functions of the face on the pair's continuous extension
+       (order 4) at `SAMPLES` points, so that two crossings inside one step are seen, and
+       locates the first sign change by the Illinois method to round-off;
+    4. if there is one, ends the step there (`StepOutput.h_taken`), and decides the new
+       face by the projected problem at that instant: a backward Euler stage of the
+       model's own projector over `PROBE` times the step (`solver`), which tells a
+       crossing from a sliding entry and a saturation entered from one left.
+
+    Events are the sign changes of the held rows' switching functions (a crossing) and
+    interior multipliers reaching a bound of their set (a sliding mode's exit). The event
+    time carries its sensitivity: the implicit function theorem on the switching
+    function moves the event state along the pre-event flow and the new face's flow back
+    (the saltation term $(f^- - f^+)\,d\tau$, zero in value).
+
+    Limits (the stepper refuses what it does not handle, before any work): laws on
+    differential rows (friction as a proximal map, contacts with impacts); separable
+    sets only (a box per row: relays, saturations, diodes on multipliers). Non-stiff
+    frozen systems (explicit pair). Accumulating events (Zeno, chattering) are not
+    handed over to time stepping: they end with a failure code (`max_steps`), never a
+    `successful` wrong answer.
+    """
+
+    solver: AbstractNonlinearSolver = eqx.field(default_factory=default_solver)
+    tableau: ExplicitPair = eqx.field(static=True, default=DOPRI5)
+
+    @property
+    def order(self) -> int:
+        return self.tableau.order
+
+    @property
+    def error_order(self) -> int:
+        return self.tableau.order
+
+    @property
+    def locates_events(self) -> bool:
+        return True
+
+    def validate_model(self, model: Model) -> None:
+        check_model(model)
+
+    def step(self, model, t0, h, y0, args):
+        T = self.tableau
+        face = decide_face(model, t0, h, y0, args)
+        y0 = algebraic_values(model, face, t0, y0, args)
+        K = self._stages(model, face, t0, h, y0, args)
+        y1 = algebraic_values(model, face, t0 + h, y0 + h * (jnp.asarray(T.b, y0.dtype) @ K), args)
+        y_error = h * (jnp.asarray(T.b_error, y0.dtype) @ K)
+        success = StepStats(
+            iterations=jnp.zeros((), jnp.int32),
+            residual_norm=jnp.zeros((), y0.dtype),
+            nonlinear_result=RESULTS.successful,
+        )
+        zeros = jnp.zeros_like(y1)
+        if not model.has_algebraic:
+            return StepOutput(y1=y1, y_error=y_error, multipliers=zeros, stats=success)
+
+        def dense(theta):
+            return y0 + h * (jnp.asarray(T.dense(theta), y0.dtype) @ K)
+
+        def phi(theta):
+            t = t0 + theta * h
+            y = algebraic_values(model, face, t, dense(theta), args)
+            return jnp.min(switching(model, face, t, y, args))
+
+        sg = jax.lax.stop_gradient
+        thetas = jnp.arange(1, SAMPLES + 1, dtype=y0.dtype) / SAMPLES
+        found, k = first_bracket(sg(jax.vmap(phi)(thetas)))
+
+        def event(_):
+            return self._at_event(model, face, t0, h, y0, args, dense, phi, k)
+
+        def no_event(_):
+            return y1, success, jnp.ones((), y0.dtype)
+
+        y_new, stats, theta = jax.lax.cond(found, event, no_event, None)
+        return StepOutput(
+            y1=y_new, y_error=y_error, multipliers=zeros, stats=stats, h_taken=sg(theta * h)
+        )
+
+    def _stages(self, model, face, t0, h, y0, args):
+        # The stage rates k_i of the frozen system, stacked (stages, n).
+        T = self.tableau
+        a = T.a
+        ks = []
+        for i, c in enumerate(T.c):
+            increment = sum((a[i, j] * ks[j] for j in range(i) if a[i, j] != 0.0), 0.0)
+            rate, _ = frozen_rate(model, face, t0 + c * h, y0 + h * increment, args)
+            ks.append(rate)
+        return jnp.stack(ks)
+
+    def _at_event(self, model, face, t0, h, y0, args, dense, phi, k):
+        # The step cut at the first event inside [theta_{k-1}, theta_k]: the state there
+        # (with the event time's sensitivity), the new face's selection decided by the
+        # projected problem, and the stats of that decision.
+        sg = jax.lax.stop_gradient
+        dtype = y0.dtype
+        lo = (k - 1).astype(dtype) / SAMPLES
+        hi = k.astype(dtype) / SAMPLES
+        sphi = lambda th: sg(phi(sg(th)))  # noqa: E731
+        eps = jnp.finfo(dtype).eps
+        tol = 8 * eps * (1 + jnp.abs(t0) / h)
+        theta, _ = illinois(sphi, lo, hi, jnp.maximum(sphi(lo), 0.0), sphi(hi), tol)
+        theta = sg(theta)
+        theta_ad = theta + self._event_shift(model, face, t0, h, args, dense, theta)
+        y_minus = dense(theta_ad)
+        t_e = t0 + theta * h
+        located = sg(phi(theta)) <= 0
+        # The projected problem at the event: which face the flow takes from there.
+        hp = PROBE * h
+        guess = sg(y_minus)
+        sol, _ = model.solve_stage(
+            self.solver, t_e + hp, hp, guess, None, 1.0, guess, guess, args, event_sensitivity=False
+        )
+        y_plus = jnp.where(model.algebraic, sg(sol.value), y_minus)
+        face_plus = decide_face(model, t_e, h, y_plus, args)
+        rate_plus, y_plus = frozen_rate(model, face_plus, t_e, y_plus, args)
+        # Saltation: the state after the event moves back along the new flow by d tau.
+        y_new = y_plus - rate_plus * h * (theta_ad - sg(theta_ad))
+        stats = stats_of(sol)
+        result = RESULTS.where(located, stats.nonlinear_result, RESULTS.nonlinear_failure)
+        stats = StepStats(stats.iterations, stats.residual_norm, result)
+        return y_new, stats, theta
+
+    def _event_shift(self, model, face, t0, h, args, dense, theta):
+        # d theta from the implicit function theorem on the switching function that
+        # vanishes at theta: -(dg)/(dg/dtheta), zero in value.
+        sg = jax.lax.stop_gradient
+
+        def g_all(th):
+            t = t0 + th * h
+            y = algebraic_values(model, face, t, dense(th), args)
+            return switching(model, face, t, y, args)
+
+        row = jnp.argmin(sg(g_all(theta)))
+        g, g_dot = jax.jvp(lambda th: g_all(th)[row], (theta,), (jnp.ones_like(theta),))
+        g_dot = sg(g_dot)
+        safe = jnp.where(g_dot != 0, g_dot, 1.0)
+        return jnp.where(g_dot != 0, -(g - sg(g)) / safe, 0.0)
