@@ -12,7 +12,7 @@ from .._results import RESULTS
 from .._solution import StepStats
 from .base import AbstractStepper, StepOutput, default_solver, stats_of
 from .event_locate import SAMPLES, first_bracket, illinois
-from .frozen import algebraic_values, decide_face, frozen_rate, switching
+from .frozen import algebraic_values, freeze, frozen_rate, switching
 from .rk_tableau import DOPRI5, ExplicitPair
 
 
@@ -98,7 +98,7 @@ class EventDriven(AbstractStepper):
 
     def step(self, model, t0, h, y0, args):
         T = self.tableau
-        face = decide_face(model, t0, h, y0, args)
+        face = freeze(model, t0, h, y0, args)
         y0 = algebraic_values(model, face, t0, y0, args)
         K = self._stages(model, face, t0, h, y0, args)
         y1 = algebraic_values(model, face, t0 + h, y0 + h * (jnp.asarray(T.b, y0.dtype) @ K), args)
@@ -170,7 +170,7 @@ class EventDriven(AbstractStepper):
             self.solver, t_e + hp, hp, guess, None, 1.0, guess, guess, args, event_sensitivity=False
         )
         y_plus = jnp.where(model.algebraic, sg(sol.value), y_minus)
-        face_plus = decide_face(model, t_e, h, y_plus, args)
+        face_plus = freeze(model, t_e, h, y_plus, args)
         rate_plus, y_plus = frozen_rate(model, face_plus, t_e, y_plus, args)
         # Saltation: the state after the event moves back along the new flow by d tau.
         y_new = y_plus - rate_plus * h * (theta_ad - sg(theta_ad))

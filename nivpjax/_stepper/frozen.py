@@ -121,36 +121,58 @@ def _conditions(model: Model, face: Face, t, y, args):
     return jnp.where(alg, jnp.where(face.interior, free, at_bound), 0.0)
 
 
-def algebraic_values(model: Model, face: Face, t, y, args):
+class Frozen(eqx.Module):
+    """The frozen system of one step: its `face`, and `inverse`, the inverse of the
+    Jacobian of its algebraic conditions with respect to the algebraic rows at the step's
+    start (identity on differential rows), with which every solve of the step iterates
+    (a chord Newton: exact in one iteration for a law affine in its multipliers)."""
+
+    face: Face
+    inverse: Float[Array, "n n"]
+
+
+def freeze(model: Model, t0, h, y0, args) -> Frozen:
+    """The frozen system for a step from `(t0, y0)` of length `h` (see `decide_face`)."""
+    face = decide_face(model, t0, h, y0, args)
+    n = y0.shape[0]
+    eye = jnp.eye(n, dtype=y0.dtype)
+    if not model.has_algebraic:
+        return Frozen(face, eye)
+    alg = model.algebraic
+    y0 = jax.lax.stop_gradient(y0)
+    J = jax.jacfwd(lambda yy: _conditions(model, face, t0, yy, args))(y0)
+    M = jnp.where(alg[:, None] & alg[None, :], J, eye)
+    return Frozen(face, jax.lax.stop_gradient(_linalg.solve_or_nan(M, eye)))
+
+
+def algebraic_values(model: Model, frozen: Frozen, t, y, args):
     r"""`y` with its algebraic rows solved from the frozen system at `(t, y)` (differential
-    rows unchanged): Newton on `_conditions`, `NEWTON_ITERATIONS` times from the rows'
-    values in `y`. Differentiable (the iterations are traced)."""
+    rows unchanged): `NEWTON_ITERATIONS` chord iterations on `_conditions` with the step's
+    `Frozen.inverse`, from the rows' values in `y`. Differentiable (the iterations are
+    traced: for an affine law the derivative is the implicit function theorem's)."""
     if not model.has_algebraic:
         return y
     alg = model.algebraic
-    n = y.shape[0]
-    eye = jnp.eye(n, dtype=y.dtype)
     for _ in range(NEWTON_ITERATIONS):
-        g = _conditions(model, face, t, y, args)
-        J = jax.jacfwd(lambda yy: _conditions(model, face, t, yy, args))(y)
-        M = jnp.where(alg[:, None] & alg[None, :], J, eye)
-        y = y - jnp.where(alg, _linalg.solve_or_nan(M, g), 0.0)
+        g = _conditions(model, frozen.face, t, y, args)
+        y = y - jnp.where(alg, frozen.inverse @ g, 0.0)
     return y
 
 
-def frozen_rate(model: Model, face: Face, t, y, args):
+def frozen_rate(model: Model, frozen: Frozen, t, y, args):
     """`(rate, y_full)`: the frozen system's rate of the differential rows at `(t, y)`
     (zero on algebraic rows) and `y` with its algebraic rows solved."""
-    y_full = algebraic_values(model, face, t, y, args)
+    y_full = algebraic_values(model, frozen, t, y, args)
     return model.to_state(model.f(t, y_full, args)), y_full
 
 
-def switching(model: Model, face: Face, t, y_full, args):
+def switching(model: Model, frozen: Frozen, t, y_full, args):
     r"""The switching functions of the frozen face at a solved state `y_full`, per row,
     positive while the face holds (`inf` on differential rows): $\pm f_z$ on rows at a
     bound (the side's sign: a relay at $w = 1$ holds while $s > 0$), the distance to the
     nearer bound on interior rows (a sliding relay's $1 - |w|$)."""
     alg = model.algebraic
+    face = frozen.face
     f = model.f(t, y_full, args)
     crossing = face.side * f
     inside = jnp.minimum(y_full - face.lower, face.upper - y_full)
