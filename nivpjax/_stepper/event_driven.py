@@ -10,17 +10,10 @@ from .._model import Model
 from .._nonlinear import AbstractNonlinearSolver
 from .._results import RESULTS
 from .._solution import StepStats
-from .base import AbstractStepper, StepOutput, default_solver, stats_of
+from .base import AbstractStepper, StepOutput, default_solver
 from .event_locate import SAMPLES, first_bracket, illinois
-from .frozen import algebraic_values, freeze, frozen_rate, switching
+from .frozen import algebraic_values, candidates, freeze, frozen_rate, holds, on_face, switching
 from .rk_tableau import DOPRI5, ExplicitPair
-
-
-# The projected problem that decides the face after an event is a backward Euler stage of
-# this fraction of the attempted step from the event: long enough that the event's
-# location error (round-off) does not decide it, short enough that the flow does not
-# reach another event.
-PROBE = 1e-3
 
 
 def check_model(model: Model) -> None:
@@ -60,9 +53,11 @@ class EventDriven(AbstractStepper):
        (order 4) at `SAMPLES` points, so that two crossings inside one step are seen, and
        locates the first sign change by the Illinois method to round-off;
     4. if there is one, ends the step there (`StepOutput.h_taken`), and decides the new
-       face by the projected problem at that instant: a backward Euler stage of the
-       model's own projector over `PROBE` times the step (`solver`), which tells a
-       crossing from a sliding entry and a saturation entered from one left.
+       face: the row whose switching function reached zero takes each other face of its
+       set (interior, either bound), and the one whose frozen flow holds from the event
+       (every switching function positive, or zero and rising) is kept. That is
+       Filippov's choice between crossing and sliding, and the side a sliding mode
+       leaves to (the event logic of Piiroinen and Kuznetsov); none holding is a failure.
 
     Events are the sign changes of the held rows' switching functions (a crossing) and
     interior multipliers reaching a bound of their set (a sliding mode's exit). The event
@@ -78,6 +73,7 @@ class EventDriven(AbstractStepper):
     `successful` wrong answer.
     """
 
+    # Solves the consistent initial state (the loop's), as for the other steppers.
     solver: AbstractNonlinearSolver = eqx.field(default_factory=default_solver)
     tableau: ExplicitPair = eqx.field(static=True, default=DOPRI5)
 
@@ -131,6 +127,12 @@ class EventDriven(AbstractStepper):
             return y1, success, jnp.ones((), y0.dtype)
 
         y_new, stats, theta = jax.lax.cond(found, event, no_event, None)
+        # A face that does not hold at the step's own start (a multiplier outside its set,
+        # a state on the wrong side of its surface) was decided wrongly: no answer.
+        scale = jnp.sqrt(jnp.finfo(y0.dtype).eps) * (1 + jnp.max(jnp.abs(y0)))
+        wrong = sg(phi(jnp.zeros((), y0.dtype))) < -scale
+        result = RESULTS.where(wrong, RESULTS.nonlinear_failure, stats.nonlinear_result)
+        stats = StepStats(stats.iterations, stats.residual_norm, result)
         return StepOutput(
             y1=y_new, y_error=y_error, multipliers=zeros, stats=stats, h_taken=sg(theta * h)
         )
@@ -148,8 +150,8 @@ class EventDriven(AbstractStepper):
 
     def _at_event(self, model, face, t0, h, y0, args, dense, phi, k):
         # The step cut at the first event inside [theta_{k-1}, theta_k]: the state there
-        # (with the event time's sensitivity), the new face's selection decided by the
-        # projected problem, and the stats of that decision.
+        # (with the event time's sensitivity) on the new face, and whether the event was
+        # located and the new face decided.
         sg = jax.lax.stop_gradient
         dtype = y0.dtype
         lo = (k - 1).astype(dtype) / SAMPLES
@@ -163,21 +165,43 @@ class EventDriven(AbstractStepper):
         y_minus = dense(theta_ad)
         t_e = t0 + theta * h
         located = sg(phi(theta)) <= 0
-        # The projected problem at the event: which face the flow takes from there.
-        hp = PROBE * h
-        guess = sg(y_minus)
-        sol, _ = model.solve_stage(
-            self.solver, t_e + hp, hp, guess, None, 1.0, guess, guess, args, event_sensitivity=False
-        )
-        y_plus = jnp.where(model.algebraic, sg(sol.value), y_minus)
-        face_plus = freeze(model, t_e, h, y_plus, args)
-        rate_plus, y_plus = frozen_rate(model, face_plus, t_e, y_plus, args)
+        frozen_plus, decided = self._next_face(model, face, t_e, h, sg(y_minus), args)
+        rate_plus, y_plus = frozen_rate(model, frozen_plus, t_e, y_minus, args)
         # Saltation: the state after the event moves back along the new flow by d tau.
         y_new = y_plus - rate_plus * h * (theta_ad - sg(theta_ad))
-        stats = stats_of(sol)
-        result = RESULTS.where(located, stats.nonlinear_result, RESULTS.nonlinear_failure)
-        stats = StepStats(stats.iterations, stats.residual_norm, result)
-        return y_new, stats, theta
+        ok = located & decided
+        result = RESULTS.where(ok, RESULTS.successful, RESULTS.nonlinear_failure)
+        zero = jnp.zeros((), dtype)
+        return y_new, StepStats(jnp.zeros((), jnp.int32), zero, result), theta
+
+    def _next_face(self, model, frozen, t_e, h, y_e, args):
+        # The face after the event at (t_e, y_e): the switching row that reached zero
+        # takes each other face of its set in turn (interior, lower bound, upper bound),
+        # and the one whose frozen flow holds from there is the new face (Filippov's
+        # choice between crossing and sliding, and a sliding mode's exit side; the
+        # Piiroinen-Kuznetsov event logic). Returns it and whether one held.
+        face = frozen.face
+        g = switching(model, frozen, t_e, algebraic_values(model, frozen, t_e, y_e, args), args)
+        row = jnp.argmin(g)
+        faces = candidates(face, row)
+        tol = jnp.sqrt(jnp.finfo(y_e.dtype).eps) * (1 + jnp.max(jnp.abs(y_e)))
+
+        def judge(f):
+            fz = on_face(model, f, t_e, y_e, args)
+            return holds(model, fz, t_e, y_e, args, tol), fz
+
+        valid, frozens = jax.vmap(judge)(faces)
+        same = jnp.stack(
+            [
+                face.interior[row],
+                ~face.interior[row] & (face.side[row] < 0),
+                ~face.interior[row] & (face.side[row] > 0),
+            ]
+        )
+        valid = valid & ~same
+        pick = jnp.argmax(valid)
+        chosen = jax.tree.map(lambda x: x[pick], frozens)
+        return chosen, jnp.any(valid)
 
     def _event_shift(self, model, face, t0, h, args, dense, theta):
         # d theta from the implicit function theorem on the switching function that

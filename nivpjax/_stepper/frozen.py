@@ -80,8 +80,9 @@ def decide_face(model: Model, t0, h, y0, args) -> Face:
     r"""The face of every algebraic row for a step from `(t0, y0)` of length `h`: the
     projector's Jacobian at $v = z_0 + \rho f_z(t_0 + \delta, y_0 + \delta \dot y_0)$,
     $\delta$ = `LOOK_AHEAD` $h$ (the state a little along the flow, so that a state on a
-    switching surface takes the face of the side the flow goes to), its diagonal read
-    as 1 (interior) or 0 (at a bound). The algebraic rows of `y0` carry the previous
+    switching surface takes the face of the side the flow goes to) and $\rho$ the
+    scaling of a stage of length $\delta$, its diagonal read as 1 (interior) or 0 (at a
+    bound). The algebraic rows of `y0` carry the previous
     face: the values the last step ended with, or the selection an event's projected
     problem decided. No gradient: a face is a discrete choice."""
     sg = jax.lax.stop_gradient
@@ -91,7 +92,10 @@ def decide_face(model: Model, t0, h, y0, args) -> Face:
     delta = LOOK_AHEAD * h
     rate = model.to_state(model.f(t0, y0, args))
     ahead = y0 + delta * rate
-    rho = _rho(model, h, dtype)
+    # Selection rows scaled as a stage of length delta: their residual (a switching
+    # function) over delta is its rate along the flow plus its value over delta, so
+    # a state on the surface decides by the rate and one off it by its side, whatever h.
+    rho = _rho(model, delta, dtype)
     v = jnp.where(alg, y0 + rho * model.f(t0 + delta, ahead, args), y0)
     t_end = t0 + h
     project = lambda u: _project(model, t_end, h, y0, u, rho, args)  # noqa: E731
@@ -133,7 +137,11 @@ class Frozen(eqx.Module):
 
 def freeze(model: Model, t0, h, y0, args) -> Frozen:
     """The frozen system for a step from `(t0, y0)` of length `h` (see `decide_face`)."""
-    face = decide_face(model, t0, h, y0, args)
+    return on_face(model, decide_face(model, t0, h, y0, args), t0, y0, args)
+
+
+def on_face(model: Model, face: Face, t0, y0, args) -> Frozen:
+    """The frozen system of a given `face`, its chord inverse taken at `(t0, y0)`."""
     n = y0.shape[0]
     eye = jnp.eye(n, dtype=y0.dtype)
     if not model.has_algebraic:
@@ -142,7 +150,42 @@ def freeze(model: Model, t0, h, y0, args) -> Frozen:
     y0 = jax.lax.stop_gradient(y0)
     J = jax.jacfwd(lambda yy: _conditions(model, face, t0, yy, args))(y0)
     M = jnp.where(alg[:, None] & alg[None, :], J, eye)
-    return Frozen(face, jax.lax.stop_gradient(_linalg.solve_or_nan(M, eye)))
+    columns = jax.vmap(_linalg.solve_or_nan, in_axes=(None, 1), out_axes=1)
+    return Frozen(face, jax.lax.stop_gradient(columns(M, eye)))
+
+
+def candidates(face: Face, row):
+    r"""The three faces that differ from `face` at most in `row`: `row` interior, at its
+    lower bound, at its upper bound (stacked, a leading axis of 3)."""
+    faces = []
+    for interior, at_upper in ((True, True), (False, False), (False, True)):
+        bound = jnp.where(at_upper, face.upper[row], face.lower[row])
+        side = jnp.where(at_upper, 1.0, -1.0).astype(face.side.dtype)
+        faces.append(
+            Face(
+                face.interior.at[row].set(interior),
+                face.bound.at[row].set(bound),
+                face.lower,
+                face.upper,
+                face.side.at[row].set(side),
+            )
+        )
+    return jax.tree.map(lambda *x: jnp.stack(x), *faces)
+
+
+def holds(model: Model, frozen: Frozen, t, y, args, tol):
+    r"""Whether the frozen face holds just after `(t, y)`: every switching function is
+    positive there, or within `tol` of zero and rising along the frozen flow (its
+    derivative by a JVP through the algebraic solve)."""
+
+    def g(tau):
+        y_free = y + tau * frozen_rate(model, frozen, t, y, args)[0]
+        y_full = algebraic_values(model, frozen, t + tau, y_free, args)
+        return switching(model, frozen, t + tau, y_full, args)
+
+    zero = jnp.zeros((), y.dtype)
+    value, rate = jax.jvp(g, (zero,), (jnp.ones_like(zero),))
+    return jnp.all((value > tol) | ((value >= -tol) & (rate > 0)))
 
 
 def algebraic_values(model: Model, frozen: Frozen, t, y, args):
