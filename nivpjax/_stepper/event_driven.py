@@ -117,8 +117,10 @@ class EventDriven(AbstractStepper):
             return jnp.min(switching(model, face, t, y, args))
 
         sg = jax.lax.stop_gradient
-        thetas = jnp.arange(1, SAMPLES + 1, dtype=y0.dtype) / SAMPLES
-        found, k = first_bracket(sg(jax.vmap(phi)(thetas)))
+        # The start too: a face that does not hold there was decided wrongly (below).
+        thetas = jnp.arange(0, SAMPLES + 1, dtype=y0.dtype) / SAMPLES
+        samples = sg(jax.vmap(phi)(thetas))
+        found, k = first_bracket(samples[1:])
 
         def event(_):
             return self._at_event(model, face, t0, h, y0, args, dense, phi, k)
@@ -130,7 +132,7 @@ class EventDriven(AbstractStepper):
         # A face that does not hold at the step's own start (a multiplier outside its set,
         # a state on the wrong side of its surface) was decided wrongly: no answer.
         scale = jnp.sqrt(jnp.finfo(y0.dtype).eps) * (1 + jnp.max(jnp.abs(y0)))
-        wrong = sg(phi(jnp.zeros((), y0.dtype))) < -scale
+        wrong = samples[0] < -scale
         result = RESULTS.where(wrong, RESULTS.nonlinear_failure, stats.nonlinear_result)
         stats = StepStats(stats.iterations, stats.residual_norm, result)
         return StepOutput(
