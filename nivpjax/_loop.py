@@ -256,6 +256,8 @@ def attempt(
         cut = out.h_taken < h_try
         last = last & ~cut
         h_step = jnp.where(cut, jax.lax.stop_gradient(out.h_taken), h_try)
+        # The controller restarts after the event: no growth beyond the attempted step.
+        h_next = jnp.where(cut & accept, jnp.minimum(h_next, h_try), h_next)
     t_new = jnp.where(accept, jnp.where(last, t1, s.t + h_step), s.t)
     y_new = jnp.where(accept, out.y1, s.y)
     idx = s.n_accepted + 1

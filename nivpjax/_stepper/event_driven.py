@@ -11,9 +11,16 @@ from .._nonlinear import AbstractNonlinearSolver
 from .._results import RESULTS
 from .._solution import StepStats
 from .base import AbstractStepper, StepOutput, default_solver
+from .bathe import Bathe
 from .event_locate import SAMPLES, first_bracket, illinois
 from .frozen import algebraic_values, candidates, freeze, frozen_rate, holds, on_face, switching
 from .rk_tableau import DOPRI5, ExplicitPair
+
+
+# A step whose first event lies within this fraction of it is handed over to the fallback
+# (time stepping): the events are denser than the error control's smooth step by this
+# factor, an accumulation (a Zeno point, chattering) rather than an isolated event.
+ACCUMULATION = 1e-3
 
 
 def check_model(model: Model) -> None:
@@ -76,6 +83,7 @@ class EventDriven(AbstractStepper):
     # Solves the consistent initial state (the loop's), as for the other steppers.
     solver: AbstractNonlinearSolver = eqx.field(default_factory=default_solver)
     tableau: ExplicitPair = eqx.field(static=True, default=DOPRI5)
+    fallback: AbstractStepper | None = eqx.field(default_factory=Bathe)
 
     @property
     def order(self) -> int:
@@ -93,6 +101,36 @@ class EventDriven(AbstractStepper):
         check_model(model)
 
     def step(self, model, t0, h, y0, args):
+        out = self._frozen_step(model, t0, h, y0, args)
+        if self.fallback is None or not model.has_algebraic:
+            return out
+        # Events accumulating: the first one lies within ACCUMULATION of the step the
+        # error control allows (a Zeno point, chattering), or no face holds after it.
+        # Time stepping takes the step.
+        failed = out.stats.nonlinear_result != RESULTS.successful
+        handover = (out.h_taken < ACCUMULATION * h) | failed
+        return jax.lax.cond(
+            handover,
+            lambda: self._handed_over(model, t0, h, y0, args),
+            lambda: out,
+        )
+
+    def _handed_over(self, model, t0, h, y0, args):
+        # The fallback's step, charged (as the loop charges time-stepping steps) with the
+        # violation of a constraint it crossed and a held phase it left inside the step,
+        # in state units on every row (a floor under the error norm).
+        out = self.fallback.step(model, t0, h, y0, args)
+        t1 = t0 + h
+        violation = model.violation(t1, h, y0, out.y1, args)
+        left, _ = model.held_exit(t1, h, y0, out.y1, args)
+        floor = jax.lax.stop_gradient(jnp.maximum(violation, left))
+        y_error = jnp.zeros_like(out.y1) if out.y_error is None else out.y_error
+        y_error = jnp.where(jnp.abs(y_error) > floor, y_error, floor)
+        return StepOutput(
+            out.y1, y_error, out.multipliers, out.stats, h_taken=jnp.asarray(h, out.y1.dtype)
+        )
+
+    def _frozen_step(self, model, t0, h, y0, args):
         T = self.tableau
         face = freeze(model, t0, h, y0, args)
         y0 = algebraic_values(model, face, t0, y0, args)
@@ -106,7 +144,7 @@ class EventDriven(AbstractStepper):
         )
         zeros = jnp.zeros_like(y1)
         if not model.has_algebraic:
-            return StepOutput(y1=y1, y_error=y_error, multipliers=zeros, stats=success)
+            return StepOutput(y1, y_error, zeros, success, h_taken=jnp.asarray(h, y0.dtype))
 
         def dense(theta):
             return y0 + h * (jnp.asarray(T.dense(theta), y0.dtype) @ K)
@@ -136,7 +174,11 @@ class EventDriven(AbstractStepper):
         result = RESULTS.where(wrong, RESULTS.nonlinear_failure, stats.nonlinear_result)
         stats = StepStats(stats.iterations, stats.residual_norm, result)
         return StepOutput(
-            y1=y_new, y_error=y_error, multipliers=zeros, stats=stats, h_taken=sg(theta * h)
+            y1=y_new,
+            y_error=y_error,
+            multipliers=zeros,
+            stats=stats,
+            h_taken=sg(theta * h).astype(y0.dtype),
         )
 
     def _stages(self, model, face, t0, h, y0, args):
