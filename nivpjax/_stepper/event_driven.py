@@ -66,21 +66,30 @@ class EventDriven(AbstractStepper):
        Filippov's choice between crossing and sliding, and the side a sliding mode
        leaves to (the event logic of Piiroinen and Kuznetsov); none holding is a failure.
 
-    Events are the sign changes of the held rows' switching functions (a crossing) and
+    Events are the sign changes of the switching functions of rows at a bound (a crossing) and
     interior multipliers reaching a bound of their set (a sliding mode's exit). The event
     time carries its sensitivity: the implicit function theorem on the switching
     function moves the event state along the pre-event flow and the new face's flow back
     (the saltation term $(f^- - f^+)\,d\tau$, zero in value).
 
+    Where events accumulate (a Zeno point, chattering: the first event of a step within
+    `ACCUMULATION` of the step the error control allows, or no face holding after it),
+    the step is handed over to `fallback` (default [`nivpjax.Bathe`][]; `None` ends such
+    a run with a failure code instead), charged with the violation and held exit the
+    loop charges time-stepping steps, and the next steps are event-driven again.
+
     Limits (the stepper refuses what it does not handle, before any work): laws on
     differential rows (friction as a proximal map, contacts with impacts); separable
     sets only (a box per row: relays, saturations, diodes on multipliers). Non-stiff
-    frozen systems (explicit pair). Accumulating events (Zeno, chattering) are not
-    handed over to time stepping: they end with a failure code (`max_steps`), never a
-    `successful` wrong answer.
+    frozen systems (explicit pair).
+
+    **Arguments:**
+
+    - `solver`: solves the consistent initial state (as for the other steppers).
+    - `tableau`: the explicit pair (default Dormand–Prince 5(4)).
+    - `fallback`: the time-stepping stepper for accumulating events, or `None`.
     """
 
-    # Solves the consistent initial state (the loop's), as for the other steppers.
     solver: AbstractNonlinearSolver = eqx.field(default_factory=default_solver)
     tableau: ExplicitPair = eqx.field(static=True, default=DOPRI5)
     fallback: AbstractStepper | None = eqx.field(default_factory=Bathe)
