@@ -221,7 +221,7 @@ def _solve_impl(
     )
     if t_eval is not None:
         # Without saved steps the loop filled `y_eval` itself.
-        y_eval = interpolate(sol, t_eval, model, args) if save_steps else sol.y_eval
+        y_eval = interpolate(sol, t_eval, model, args, stepper) if save_steps else sol.y_eval
         multipliers_eval = interpolate_multipliers(sol, t_eval, y_eval, model, args)
         sol = eqx.tree_at(
             lambda s: (s.t_eval, s.y_eval, s.multipliers_eval),

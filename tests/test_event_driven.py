@@ -112,9 +112,10 @@ def _relay_adaptive(rtol):
         0.0,
         8.0,
         jnp.array([0.3, 0.0]),
-        stepper=ED,
+        stepper=nj.EventDriven(),  # the default, with its hand-over
         controller=nj.PIDController(rtol=rtol, atol=rtol / 100),
         max_steps=1000,
+        t_eval=jnp.linspace(0.0, 8.0, 161),
         **RELAY,
     )
 
@@ -146,8 +147,14 @@ def test_sliding_entry_and_exit_located_and_equivalent_control():
         assert np.max(np.abs(ys[sliding, 0])) < 1e-12
         np.testing.assert_allclose(ys[sliding, 1], 1.3 * np.sin(2 * ts[sliding]), atol=1e-9)
         errors.append(np.max(np.abs(ys[:, 0] - forced_relay_exact(ts, 0.3, 1.3, 2.0, 8.0))))
+        # Between the steps too (the pair's continuous extension): a step over a whole
+        # excursion, with both ends on the surface, would show here only (one did, at
+        # a sliding exit read as sliding again from a state 7e-18 on the wrong side).
+        te = np.asarray(sol.t_eval)
+        exact = forced_relay_exact(te, 0.3, 1.3, 2.0, 8.0)
+        errors[-1] = max(errors[-1], np.max(np.abs(np.asarray(sol.y_eval[:, 0]) - exact)))
     # Tolerance proportionality: the error follows rtol (order 5 with local error control).
-    assert errors[0] < 1e-4 and errors[1] < 1e-6 and errors[2] < 1e-8, errors
+    assert errors[0] < 2e-4 and errors[1] < 2e-6 and errors[2] < 2e-8, errors
     assert errors[2] < errors[1] < errors[0]
 
 

@@ -55,6 +55,12 @@ class AbstractStepper(eqx.Module):
         prediction or held exit."""
         return False
 
+    def dense_output(self, model: Model, t, t0, y0, t1, y1, args):
+        """`(value, usable)`: the state at `t` inside the accepted step from `(t0, y0)` to
+        `(t1, y1)` by the stepper's own continuous extension, and whether it vouches for
+        this step; `None` (the default): the loop's interpolant (`nivpjax._loop.interpolate`)."""
+        return None
+
     def validate_model(self, model: Model) -> None:
         """Check, before any work, that this stepper handles `model` (its arrays are
         concrete here). Raises `ValueError`. Default: every model."""

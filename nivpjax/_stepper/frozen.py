@@ -104,7 +104,16 @@ def decide_face(model: Model, t0, h, y0, args) -> Face:
     far = FAR * (1 + jnp.abs(y0))
     lower = project(jnp.where(alg, y0 - far, y0))
     upper = project(jnp.where(alg, y0 + far, y0))
-    interior = alg & (slope > 0.5)
+    # A row exactly at a bound (where an event's decision or the last step left it)
+    # stays there unless the flow points clearly inside: at a sliding mode's tangential
+    # exit the rate is zero to round-off and a state 1e-17 on the wrong side would read
+    # as sliding again.
+    tol = jnp.sqrt(jnp.finfo(dtype).eps) * (1 + jnp.abs(y0))
+    at_lower, at_upper = alg & (y0 == lower), alg & (y0 == upper)
+    inward = jnp.where(at_upper, upper - v, v - lower)
+    stay = (at_lower | at_upper) & (inward <= tol)
+    interior = alg & (slope > 0.5) & ~stay
+    value = jnp.where(stay, y0, value)
     side = jnp.where(jnp.abs(value - upper) <= jnp.abs(value - lower), 1.0, -1.0)
     return sg(Face(interior, value, lower, upper, side.astype(dtype)))
 
@@ -174,18 +183,33 @@ def candidates(face: Face, row):
 
 
 def holds(model: Model, frozen: Frozen, t, y, args, tol):
-    r"""Whether the frozen face holds just after `(t, y)`: every switching function is
-    positive there, or within `tol` of zero and rising along the frozen flow (its
-    derivative by a JVP through the algebraic solve)."""
+    r"""Whether the frozen face holds just after `(t, y)`: every switching function $g$
+    along the frozen flow is positive there, or within `tol` of zero and rising, or zero
+    with zero rate and convex (its second derivative positive: the tangential departure
+    of a sliding mode's exit, where the flow leaves the surface quadratically). The flow is
+    its second-order Taylor polynomial, $y + \tau \dot y + \tfrac{\tau^2}{2} \ddot y$, so
+    that the derivatives of $g$ at $\tau = 0$ are exact to second order (JVPs through the
+    algebraic solve)."""
 
-    def g(tau):
-        y_free = y + tau * frozen_rate(model, frozen, t, y, args)[0]
-        y_full = algebraic_values(model, frozen, t + tau, y_free, args)
-        return switching(model, frozen, t + tau, y_full, args)
+    def rate(tau, u):
+        return frozen_rate(model, frozen, t + tau, u, args)[0]
 
     zero = jnp.zeros((), y.dtype)
-    value, rate = jax.jvp(g, (zero,), (jnp.ones_like(zero),))
-    return jnp.all((value > tol) | ((value >= -tol) & (rate > 0)))
+    one = jnp.ones_like(zero)
+    r0 = rate(zero, y)
+    r1 = jax.jvp(lambda tau: rate(tau, y + tau * r0), (zero,), (one,))[1]
+
+    def g(tau):
+        u = y + tau * r0 + 0.5 * tau**2 * r1
+        u = algebraic_values(model, frozen, t + tau, u, args)
+        return switching(model, frozen, t + tau, u, args)
+
+    def g_and_rate(tau):
+        return jax.jvp(g, (tau,), (one,))
+
+    (value, first), (_, second) = jax.jvp(g_and_rate, (zero,), (one,))
+    rises = (first > tol) | ((first >= -tol) & (second > 0))
+    return jnp.all((value > tol) | ((value >= -tol) & rises))
 
 
 def algebraic_values(model: Model, frozen: Frozen, t, y, args):
