@@ -231,7 +231,11 @@ def main(argv=None):
         lines = chua_issue_table(chua_issue(log))
         print("\n".join(lines), flush=True)
         path = Path(__file__).parent / "results" / "event_driven_chua.md"
-        path.write_text("\n".join(out[:2] + lines))
+        head = (
+            f"`OPENBLAS_NUM_THREADS=1 python -m benchmarks.event_driven --chua-issue`, {start}, "
+            f"{os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.2f}."
+        )
+        path.write_text("\n".join([*out[:2], head, "", *lines]))
         log(f"wrote {path}")
         return
     for name in args.scenes:
