@@ -340,3 +340,34 @@ def test_without_a_fallback_accumulating_switches_end_with_a_failure_code():
         throw=False,
     )
     assert sol.result != nj.RESULTS.successful
+
+
+@jax.jit
+def _relay_final(amplitude):
+    def field(t, y, a):
+        return jnp.stack([-y[1] + a * jnp.sin(2.0 * t), y[0]])
+
+    sol = nj.solve(
+        field,
+        0.0,
+        2.3,
+        jnp.array([0.3, 0.0]),
+        amplitude,
+        stepper=ED,
+        controller=nj.PIDController(rtol=1e-9, atol=1e-11),
+        saveat=nj.SaveAt(),
+        adjoint="forward",
+        **RELAY,
+    )
+    return sol.y_final[0]
+
+
+def test_gradient_through_a_sliding_entry_and_exit_matches_finite_differences():
+    # x(2.3) of the forced relay after a crossing phase, a sliding phase entered at 1.599
+    # and left at 2.010 (the equivalent control reaching -1: a multiplier-side event)
+    # and part of an excursion: both event times move with the amplitude.
+    g = float(jax.jacfwd(_relay_final)(jnp.asarray(1.3)))
+    eps = 1e-6
+    fd = (float(_relay_final(1.3 + eps)) - float(_relay_final(1.3 - eps))) / (2 * eps)
+    assert g == pytest.approx(fd, rel=1e-6)
+    assert abs(g) > 0.1
