@@ -75,6 +75,7 @@ from ._stepper import (
     BackwardEuler as BackwardEuler,
     Bathe as Bathe,
     EmbeddedBETR as EmbeddedBETR,
+    EventDriven as EventDriven,
     Richardson as Richardson,
     StepOutput as StepOutput,
     Theta as Theta,

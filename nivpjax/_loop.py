@@ -223,11 +223,7 @@ def attempt(
     h_try = jax.lax.stop_gradient(h_try)
     out = stepper.step(model, s.t, h_try, s.y, args)
     y_error = jnp.zeros_like(out.y1) if out.y_error is None else out.y_error
-    violation = model.violation(s.t + h_try, h_try, s.y, out.y1, args)
-    next_event = model.next_event(s.t + h_try, h_try, s.y, out.y1, args)
-    exit_violation, exit_time = model.held_exit(s.t + h_try, h_try, s.y, out.y1, args)
-    violation = jnp.maximum(violation, exit_violation)
-    next_event = jnp.minimum(next_event, exit_time)
+    violation, next_event = _events(model, stepper, s, h_try, out, args)
     info = StepInfo(
         t0=s.t,
         h=h_try,
@@ -254,7 +250,15 @@ def attempt(
         h_next = jnp.minimum(h_next, h_max)
     h_next = jax.lax.stop_gradient(h_next)
 
-    t_new = jnp.where(accept, jnp.where(last, t1, s.t + h_try), s.t)
+    h_step = h_try
+    if out.h_taken is not None:
+        # A stepper that ended the step at an event it located: the state is there.
+        cut = out.h_taken < h_try
+        last = last & ~cut
+        h_step = jnp.where(cut, jax.lax.stop_gradient(out.h_taken), h_try)
+        # The controller restarts after the event: no growth beyond the attempted step.
+        h_next = jnp.where(cut & accept, jnp.minimum(h_next, h_try), h_next)
+    t_new = jnp.where(accept, jnp.where(last, t1, s.t + h_step), s.t)
     y_new = jnp.where(accept, out.y1, s.y)
     idx = s.n_accepted + 1
 
@@ -264,7 +268,7 @@ def attempt(
     y_eval = s.y_eval
     if y_eval is not None:
         final = accept & last
-        y_eval = _fill_eval(model, t_eval, s.t, s.y, t_new, y_new, final, args, y_eval)
+        y_eval = _fill_eval(model, t_eval, s.t, s.y, t_new, y_new, final, args, y_eval, stepper)
     attempts = s.attempts
     if attempts is not None:
         err = jnp.sqrt(jnp.mean(jnp.where(error_mask, y_error, 0.0) ** 2))
@@ -285,7 +289,7 @@ def attempt(
         result=result,
         ts=put(s.ts, t_new),
         ys=put(s.ys, y_new),
-        hs=put(s.hs, h_try),
+        hs=put(s.hs, h_step),
         multipliers=put(s.multipliers, out.multipliers),
         iterations=put(s.iterations, out.stats.iterations.astype(jnp.int32)),
         residual_norms=put(s.residual_norms, out.stats.residual_norm),
@@ -295,7 +299,20 @@ def attempt(
     )
 
 
-def _fill_eval(model, t_eval, ta, ya, tb, yb, final, args, y_eval):
+def _events(model, stepper, s, h_try, out, args):
+    # `(violation, next_event)` of an attempt for the controller: a constraint crossed
+    # without being enforced, and the predicted time to the next event (held exits
+    # included); none for a stepper that locates events itself.
+    if stepper.locates_events:
+        zero = jnp.zeros((), out.y1.dtype)
+        return zero, jnp.full((), jnp.inf, out.y1.dtype)
+    violation = model.violation(s.t + h_try, h_try, s.y, out.y1, args)
+    next_event = model.next_event(s.t + h_try, h_try, s.y, out.y1, args)
+    exit_violation, exit_time = model.held_exit(s.t + h_try, h_try, s.y, out.y1, args)
+    return jnp.maximum(violation, exit_violation), jnp.minimum(next_event, exit_time)
+
+
+def _fill_eval(model, t_eval, ta, ya, tb, yb, final, args, y_eval, stepper=None):
     # The states at the output times inside the accepted step [ta, tb), and at tb too on
     # the last step: the step `interpolate` picks for each time from saved steps, so both
     # give the same values (NaN stays where the run stopped before a time). A rejected
@@ -303,7 +320,7 @@ def _fill_eval(model, t_eval, ta, ya, tb, yb, final, args, y_eval):
     span = jnp.where(tb > ta, tb - ta, 1.0)
     w = jnp.clip((t_eval - ta) / span, 0.0, 1.0)
     safe_tb = jnp.where(tb > ta, tb, ta + 1.0)
-    at = jax.vmap(lambda t, w: _in_step(model, t, w, ta, ya, safe_tb, yb, args))
+    at = jax.vmap(lambda t, w: _in_step(model, t, w, ta, ya, safe_tb, yb, args, stepper))
     inside = (t_eval >= ta) & ((t_eval < tb) | final)
     return jnp.where(inside[:, None], at(t_eval, w), y_eval)
 
@@ -401,7 +418,7 @@ def run(
     return finish(final, t1)
 
 
-def interpolate(sol: Solution, t_eval, model: Model | None = None, args=None):
+def interpolate(sol: Solution, t_eval, model: Model | None = None, args=None, stepper=None):
     r"""The solution at `t_eval` from the accepted states; NaN after the point where the
     solve stopped (a failed run is flagged in `result`).
 
@@ -436,6 +453,10 @@ def interpolate(sol: Solution, t_eval, model: Model | None = None, args=None):
     (a contact's velocity jumps inside a step, which no rate per end describes; a
     resting contact's force is not in the vector field).
 
+    With `stepper`, a stepper that has its own continuous extension
+    (`AbstractStepper.dense_output`: the event-driven stepper's, of order 4) gives the
+    states inside the steps it vouches for.
+
     A step across which a switch happens (`Model.switch_jump`) interpolates from its start
     moved by the saltation term $(f^- - f^+)\,d\tau$, zero in value: the interpolant's
     derivatives then follow the post-switch branch, as the step's end does. Without it, a
@@ -452,16 +473,22 @@ def interpolate(sol: Solution, t_eval, model: Model | None = None, args=None):
         y = ya + w[:, None] * (yb - ya)
     else:
         safe_tb = jnp.where(tb > ta, tb, ta + 1.0)  # a finished run's padding
-        inside = jax.vmap(lambda *a: _in_step(model, *a, args))
+        inside = jax.vmap(lambda *a: _in_step(model, *a, args, stepper))
         y = inside(t_eval, w, ta, ya, safe_tb, yb)
     beyond = t_eval > sol.ts[k] * (1 + 1e-12) + 1e-300
     return jnp.where(beyond[:, None], jnp.nan, y)
 
 
-def _in_step(model: Model, t, w, t0, y0, t1, y1, args):
+def _in_step(model: Model, t, w, t0, y0, t1, y1, args, stepper=None):
     # The state at the fraction w of the step [t0, t1], from the start as the steppers
     # take it (impacts applied, right-limit selections, the saltation shift of a switch
-    # inside); see `interpolate`.
+    # inside); see `interpolate`. A stepper with its own continuous extension gives it
+    # (`AbstractStepper.dense_output`), where it vouches for the step.
+    if stepper is not None:
+        own = stepper.dense_output(model, t, t0, y0, t1, y1, args)
+        if own is not None:
+            value, usable = own
+            return jnp.where(usable, value, _in_step(model, t, w, t0, y0, t1, y1, args))
     h = t1 - t0
     y0, f0, _ = model.step_start(t0, h, y0, args)
     y0 = y0 + model.switch_jump(t0, y0, t1, y1, args)

@@ -147,6 +147,7 @@ def solve(
         tau=float(tau_arr) if tau_arr.shape == () else jnp.asarray(tau_arr, dtype),
         equation_rows=equation_rows,
     )
+    stepper.validate_model(model)
     traced = v.is_traced((y0, t0, t1, args, t_eval, h0))
     call = _solve_jit.prepare(
         model,
@@ -220,7 +221,7 @@ def _solve_impl(
     )
     if t_eval is not None:
         # Without saved steps the loop filled `y_eval` itself.
-        y_eval = interpolate(sol, t_eval, model, args) if save_steps else sol.y_eval
+        y_eval = interpolate(sol, t_eval, model, args, stepper) if save_steps else sol.y_eval
         multipliers_eval = interpolate_multipliers(sol, t_eval, y_eval, model, args)
         sol = eqx.tree_at(
             lambda s: (s.t_eval, s.y_eval, s.multipliers_eval),

@@ -16,12 +16,17 @@ from .._solution import StepStats
 
 class StepOutput(eqx.Module):
     """One attempted step: the candidate `y1`, its local error estimate `y_error` (`None` when
-    the scheme has none), the stage residual at `y1` (`multipliers`), and `stats`."""
+    the scheme has none), the stage residual at `y1` (`multipliers`), and `stats`.
+
+    `h_taken`: where a stepper ends the step short of its size, at an event it located
+    (`AbstractStepper.locates_events`), the length it covered; `y1` is the state there.
+    `None`: the whole step."""
 
     y1: Float[Array, " n"]
     y_error: Float[Array, " n"] | None
     multipliers: Float[Array, " n"]
     stats: StepStats
+    h_taken: Float[Array, ""] | None = None
 
 
 class AbstractStepper(eqx.Module):
@@ -42,6 +47,23 @@ class AbstractStepper(eqx.Module):
     @property
     def error_order(self) -> int:
         return 0
+
+    @property
+    def locates_events(self) -> bool:
+        """Whether the stepper locates the model's events itself and ends its steps there
+        (`StepOutput.h_taken`): the loop then asks the model for no violation, event
+        prediction or held exit."""
+        return False
+
+    def dense_output(self, model: Model, t, t0, y0, t1, y1, args):
+        """`(value, usable)`: the state at `t` inside the accepted step from `(t0, y0)` to
+        `(t1, y1)` by the stepper's own continuous extension, and whether it vouches for
+        this step; `None` (the default): the loop's interpolant (`nivpjax._loop.interpolate`)."""
+        return None
+
+    def validate_model(self, model: Model) -> None:
+        """Check, before any work, that this stepper handles `model` (its arrays are
+        concrete here). Raises `ValueError`. Default: every model."""
 
     @abc.abstractmethod
     def step(self, model: Model, t0, h, y0, args) -> StepOutput: ...
