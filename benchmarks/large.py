@@ -1,0 +1,529 @@
+"""Large systems (issue 25): the strike-slip fault of `nivpjax.scenes.fault` against its size.
+
+Four tables, each size in its own subprocess (so that its peak resident memory,
+`resource.getrusage(...).ru_maxrss`, is its own):
+
+1. **Cost per step** against the number of cells N, dense kernel (the study's files at
+   10x10 and 20x20 cells, beyond them the dense matrix of the periodic spectral kernel) and
+   spectral kernel: a solve capped at `--steps` attempted steps (the study's model and
+   settings otherwise, `throw=False`), compile excluded (second call): seconds per
+   attempted step, Newton iterations per attempt, peak memory. A size is skipped when the
+   previous one's time per step, scaled by (N'/N)^3, predicts more than `--budget` seconds.
+2. **Where the time goes** in one Newton iteration: one residual (two kernel products),
+   the dense Jacobian by `jax.jacfwd` (3N products), and its LU solve (lineax), timed apart.
+3. **Whole trajectories** at the study's settings (t in [0, 34.641], rtol 1e-3,
+   atol 1e-6) for the sizes whose projected time fits `--budget`: compile, run, steps,
+   mean final slip.
+4. **Against the reference** `solve_nivp.solve_ivp_ns` (the study's baseline: composite
+   scheme, Coulomb projection, VI solver tol 1e-6, h0 5e-3, h in [1e-7, 1e3], factors in
+   [0.6, 1.8], method_order 1) at 10x10 (3 km patch) and 20x20 (5 km x 4 km), side by
+   side: time and the error of the mean final slip against nivpjax at a tight tolerance
+   (`--tight`), with nivpjax at several tolerances; the ratio at equal accuracy compares
+   the reference with the cheapest nivpjax run at least as accurate.
+
+The nonlinear solver is a command-line option (`--solver`, a Python expression with `nj`
+in scope, default `nj.SemismoothNewton()`), so the runs can be repeated with another one
+(e.g. a matrix-free Newton once it exists). Every run is float64, OPENBLAS_NUM_THREADS=1.
+
+    OPENBLAS_NUM_THREADS=1 python -m benchmarks.large            # full (tens of minutes)
+    OPENBLAS_NUM_THREADS=1 python -m benchmarks.large --quick    # small sizes, ~3 minutes
+
+Writes benchmarks/results/large.md, large.json and large.png (log-log cost per step and
+memory against N).
+"""
+
+import argparse
+import json
+import os
+import platform
+import resource
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+
+ROOT = Path(__file__).resolve().parents[1]
+RESULTS = ROOT / "benchmarks" / "results"
+KERNELS = Path(os.environ.get("NIVPJAX_FAULT_KERNELS", "/work/shared/fault"))
+STUDY_FILES = {
+    (10, 10): ("kijs_10x10elem-3x3length.npy", 3.0, 3.0),
+    (20, 20): ("kijs_20x20elem-5x4length.npy", 5.0, 4.0),
+}
+SECOND = 1000.0  # ms
+
+
+# --- one size, in a subprocess -----------------------------------------------------------------
+def _setup_jax():
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+    import jax
+
+    jax.config.update("jax_enable_x64", True)
+    return jax
+
+
+def build(kernel, nx):
+    """The study's fault at nx x nx cells: `kernel` "dense" (the study's file where there is
+    one, else the dense matrix of the periodic kernel) or "spectral"."""
+    from nivpjax import scenes
+
+    file = STUDY_FILES.get((nx, nx))
+    if kernel == "spectral":
+        length, depth = 3.0, 3.0
+        scene, x0, args = scenes.fault("spectral", nx, nx, length=length, depth=depth)
+    elif file is not None and (KERNELS / file[0]).exists():
+        name, length, depth = file
+        K = scenes.load_fault_kernel(KERNELS / name)
+        scene, x0, args = scenes.fault(K, nx, nx, length=length, depth=depth)
+    else:
+        length, depth = 3.0, 3.0
+        K = periodic_dense(nx, nx, 1.0, depth / length)
+        scene, x0, args = scenes.fault(K, nx, nx, length=length, depth=depth)
+    t1 = 30 * SECOND / scenes.fault_units(length)["time_ms"]
+    return scene, x0, args, t1
+
+
+def periodic_dense(nx, nz, lx, lz):
+    """The dense matrix of the periodic spectral kernel (its columns by FFT)."""
+    from nivpjax._elastic import spectral_apply_np, spectral_symbol
+
+    sym = spectral_symbol(nx, nz, lx, lz)
+    n = nx * nz
+    return np.stack([spectral_apply_np(sym, e, nx, nz) for e in np.eye(n)], axis=1)
+
+
+def make_solve(scene, solver_expr, max_steps, save_final=True):
+    import equinox as eqx
+
+    import nivpjax as nj
+
+    solver = eval(solver_expr, {"nj": nj})
+
+    @eqx.filter_jit
+    def solve(x0, args, t1, rtol, atol):
+        return scene.solve(
+            0.0,
+            t1,
+            x0,
+            args,
+            stepper=nj.Bathe(solver=solver),
+            controller=nj.PIDController(rtol=rtol, atol=atol),
+            max_steps=max_steps,
+            saveat=nj.SaveAt(),
+            throw=False,
+        )
+
+    return solve
+
+
+def run_one(spec):
+    """Measure one configuration (a dict); returns a dict of numbers."""
+    jax = _setup_jax()
+    import jax.numpy as jnp
+
+    scene, x0, args, t1 = build(spec["kernel"], spec["nx"])
+    n = x0.shape[0] // 3
+    out = dict(spec, N=n)
+    if spec["mode"] == "parts":
+        out.update(time_parts(jax, scene, x0, args))
+    else:
+        max_steps = spec["steps"] if spec["mode"] == "step" else spec.get("max_steps", 100_000)
+        solve = make_solve(scene, spec["solver"], max_steps)
+        call = (x0, args, jnp.asarray(t1), jnp.asarray(spec["rtol"]), jnp.asarray(spec["atol"]))
+        t0 = time.perf_counter()
+        sol = jax.block_until_ready(solve(*call))
+        first = time.perf_counter() - t0
+        t0, c0 = time.perf_counter(), time.process_time()
+        sol = jax.block_until_ready(solve(*call))
+        run, cpu = time.perf_counter() - t0, time.process_time() - c0
+        attempts = int(sol.n_accepted) + int(sol.n_rejected)
+        out.update(
+            compile_s=first - run,
+            run_s=run,
+            cpu_s=cpu,
+            accepted=int(sol.n_accepted),
+            rejected=int(sol.n_rejected),
+            newton=int(sol.n_iterations),
+            per_step_s=run / max(attempts, 1),
+            per_step_cpu_s=cpu / max(attempts, 1),
+            newton_per_step=int(sol.n_iterations) / max(attempts, 1),
+            t_final=float(sol.t_final) if hasattr(sol, "t_final") else float("nan"),
+            mean_slip=float(jnp.mean(sol.y_final[2 * n : 3 * n])),
+            result=str(sol.result),
+        )
+    out["maxrss_MB"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    return out
+
+
+def time_parts(jax, scene, x0, args):
+    """Seconds for one residual, one dense Jacobian (`jacfwd`) and one dense LU solve."""
+    import jax.numpy as jnp
+    import lineax as lx
+
+    x = jnp.asarray(x0)
+
+    def f(y):
+        return scene.dynamics(0.0, y, args, {})
+
+    res = jax.jit(f)
+    jac = jax.jit(jax.jacfwd(f))
+
+    lu_solve = jax.jit(lambda A, b: lx.linear_solve(lx.MatrixLinearOperator(A), b, lx.LU()).value)
+    A = jnp.eye(x.shape[0]) - 0.01 * jac(x)
+
+    def timed(fn, *a):
+        jax.block_until_ready(fn(*a))
+        reps, t0 = 0, time.perf_counter()
+        while reps < 3 or time.perf_counter() - t0 < 0.5:
+            jax.block_until_ready(fn(*a))
+            reps += 1
+        return (time.perf_counter() - t0) / reps
+
+    return dict(residual_s=timed(res, x), jacobian_s=timed(jac, x), lu_s=timed(lu_solve, A, x))
+
+
+def spawn(spec, timeout):
+    cmd = [sys.executable, "-m", "benchmarks.large", "--one", json.dumps(spec)]
+    env = dict(os.environ, OPENBLAS_NUM_THREADS="1")
+    try:
+        p = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=timeout)
+    except subprocess.TimeoutExpired:
+        return dict(spec, error=f"timed out after {timeout} s")
+    lines = [ln for ln in p.stdout.splitlines() if ln.startswith("{")]
+    if p.returncode != 0 or not lines:
+        return dict(spec, error=(p.stderr or p.stdout)[-400:])
+    return json.loads(lines[-1])
+
+
+# --- the reference ----------------------------------------------------------------------------
+def run_reference(nx):
+    """The study's baseline run of `solve_nivp` on the same model (same K, E, sigma, y0)."""
+    import scipy.sparse as sp
+    import solve_nivp
+
+    _setup_jax()
+    scene, x0, args, t1 = build("dense", nx)
+    a = {k: np.asarray(v) for k, v in args.items()}
+    n = a["K"].shape[0]
+    K, E, sigma = a["K"], 2 * a["zeta"] * a["R"], a["sigma"]
+    slices = [slice(0, n), slice(n, 2 * n), slice(2 * n, 3 * n)]
+
+    def rhs(t, y):
+        v, u = y[:n], y[n : 2 * n]
+        return np.concatenate([-(K @ u) - E @ v, v, np.abs(v)])
+
+    def friction(y, t=None, Fk_val=None):
+        out = np.zeros_like(y)
+        out[:n] = (0.5 + 0.1 * np.exp(-y[2 * n :] / 1000.0)) * sigma
+        return out
+
+    kwargs = dict(
+        fun=rhs,
+        t_span=(0.0, t1),
+        y0=np.asarray(x0),
+        method="composite",
+        projection="coulomb",
+        solver="VI",
+        projection_opts=dict(
+            con_force_func=friction,
+            rhok=np.ones(n),
+            component_slices=slices,
+            constraint_indices=list(range(n)),
+        ),
+        solver_opts=dict(tol=1e-6, max_iter=100),
+        adaptive=True,
+        adaptive_opts=dict(
+            h0=5e-3,
+            h_min=1e-7,
+            h_down=0.6,
+            h_up=1.8,
+            method_order=1,
+            controller="H211b",
+            b_param=4.0,
+            skip_error_indices=[],
+        ),
+        h0=5e-3,
+        component_slices=slices,
+        A=sp.identity(3 * n, format="csr"),
+    )
+    t0, c0 = time.perf_counter(), time.process_time()
+    ts, ys, *_ = solve_nivp.solve_ivp_ns(**kwargs)
+    wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+    return dict(
+        nx=nx,
+        N=n,
+        run_s=wall,
+        cpu_s=cpu,
+        steps=len(ts) - 1,
+        t_final=float(ts[-1]),
+        mean_slip=float(np.mean(ys[-1, 2 * n :])),
+        maxrss_MB=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+    )
+
+
+# --- driver -----------------------------------------------------------------------------------
+def step_sweep(kernel, sizes, opts, log):
+    rows, prev = [], None
+    for nx in sizes:
+        n = nx * nx
+        if prev is not None and "per_step_s" in prev:
+            projected = prev["per_step_s"] * opts.steps * (n / prev["N"]) ** 3
+            if projected > opts.budget:
+                log(f"  {kernel} {nx}x{nx}: skipped (projected {projected:.0f} s)")
+                rows.append(dict(kernel=kernel, nx=nx, N=n, skipped=f"projected {projected:.0f} s"))
+                break
+        spec = dict(mode="step", kernel=kernel, nx=nx, steps=opts.steps, rtol=1e-3, atol=1e-6)
+        spec["solver"] = opts.solver
+        row = spawn(spec, timeout=opts.budget * 3 + 120)
+        log(f"  {kernel} {nx}x{nx}: {_brief(row)}")
+        rows.append(row)
+        if "error" in row:
+            break
+        prev = row
+    return rows
+
+
+def _brief(row):
+    if "error" in row:
+        return "error: " + row["error"].strip().splitlines()[-1][:200]
+    keys = (
+        "per_step_s",
+        "per_step_cpu_s",
+        "newton_per_step",
+        "run_s",
+        "cpu_s",
+        "accepted",
+        "rejected",
+        "mean_slip",
+    )
+    return ", ".join(f"{k}={row[k]:.4g}" for k in keys if k in row) + (
+        f", {row['maxrss_MB']:.0f} MB"
+    )
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="small sizes only")
+    parser.add_argument("--solver", default="nj.SemismoothNewton()")
+    parser.add_argument("--steps", type=int, default=30, help="attempts per cost-per-step run")
+    parser.add_argument("--budget", type=float, default=300.0, help="seconds per run")
+    parser.add_argument("--tight", type=float, default=1e-7, help="rtol of the truth run")
+    parser.add_argument("--no-reference", action="store_true")
+    parser.add_argument("--one", help=argparse.SUPPRESS)
+    parser.add_argument("--reference-one", type=int, help=argparse.SUPPRESS)
+    opts = parser.parse_args(argv)
+    if opts.one:
+        print(json.dumps(run_one(json.loads(opts.one))))
+        return
+    if opts.reference_one:
+        print(json.dumps(run_reference(opts.reference_one)))
+        return
+    t_start = time.perf_counter()
+    lines = []
+
+    def log(msg):
+        print(msg, flush=True)
+        lines.append(msg)
+
+    dense_sizes = [4, 10, 14, 20] if opts.quick else [4, 10, 14, 20, 32, 50, 100]
+    spectral_sizes = [4, 8, 16] if opts.quick else [8, 16, 32, 64, 100, 316, 1000]
+    log(f"solver: {opts.solver}")
+    log("cost per step:")
+    steps = step_sweep("dense", dense_sizes, opts, log) + step_sweep(
+        "spectral", spectral_sizes, opts, log
+    )
+    log("where the time goes (one Newton iteration):")
+    parts = []
+    for kernel, sizes in (("dense", [10, 20]), ("spectral", [10, 20, 32])):
+        for nx in sizes[: 2 if opts.quick else None]:
+            row = spawn(dict(mode="parts", kernel=kernel, nx=nx), timeout=opts.budget + 120)
+            parts.append(row)
+            log(
+                f"  {kernel} {nx}x{nx}: "
+                + ", ".join(
+                    f"{k}={row[k]:.3g}" for k in ("residual_s", "jacobian_s", "lu_s") if k in row
+                )
+                + (row.get("error", "")[-200:])
+            )
+    log("trajectories and the reference:")
+    compare = []
+    rtols = [1e-3, 1e-4, 1e-5]
+    for nx in [10] if opts.quick else [10, 20]:
+        base = dict(mode="trajectory", kernel="dense", nx=nx, solver=opts.solver)
+        truth = spawn(dict(base, rtol=opts.tight, atol=1e-3 * opts.tight), opts.budget * 4)
+        log(f"  nivpjax {nx}x{nx} truth rtol {opts.tight:g}: {_brief(truth)}")
+        runs = []
+        for rtol in rtols:
+            row = spawn(
+                dict(base, rtol=rtol, atol=1e-6 if rtol == 1e-3 else 1e-3 * rtol), opts.budget * 2
+            )
+            log(f"  nivpjax {nx}x{nx} rtol {rtol:g}: {_brief(row)}")
+            runs.append(row)
+        ref = None
+        if not opts.no_reference:
+            ref = _spawn_reference(nx, opts.budget * 4)
+            log(f"  reference {nx}x{nx}: {_brief(ref)}")
+        compare.append(dict(nx=nx, truth=truth, runs=runs, reference=ref))
+    report = dict(
+        solver=opts.solver,
+        machine=f"{platform.machine()}, {os.cpu_count()} cores, float64",
+        steps=steps,
+        parts=parts,
+        compare=compare,
+        quick=opts.quick,
+    )
+    name = "large-quick" if opts.quick else "large"
+    RESULTS.mkdir(exist_ok=True)
+    (RESULTS / f"{name}.json").write_text(json.dumps(report, indent=1))
+    (RESULTS / f"{name}.md").write_text(markdown(report))
+    plot(report, RESULTS / f"{name}.png")
+    log(f"written to benchmarks/results/{name}.md ({time.perf_counter() - t_start:.0f} s)")
+
+
+def _spawn_reference(nx, timeout):
+    cmd = [sys.executable, "-m", "benchmarks.large", "--reference-one", str(nx)]
+    env = dict(os.environ, OPENBLAS_NUM_THREADS="1")
+    try:
+        p = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=timeout)
+    except subprocess.TimeoutExpired:
+        return dict(nx=nx, error=f"timed out after {timeout} s")
+    lines = [ln for ln in p.stdout.splitlines() if ln.startswith("{")]
+    if p.returncode != 0 or not lines:
+        return dict(nx=nx, error=(p.stderr or p.stdout)[-400:])
+    return json.loads(lines[-1])
+
+
+# --- report -----------------------------------------------------------------------------------
+def _fmt(x, spec=".3g"):
+    return "–" if x is None else format(x, spec)
+
+
+def markdown(r):
+    out = [
+        "# Large systems: the fault against its size",
+        "",
+        f"`python -m benchmarks.large{' --quick' if r['quick'] else ''}`; {r['machine']}; "
+        f"nonlinear solver `{r['solver']}`. Bathe's scheme, PID controller rtol 1e-3, atol "
+        "1e-6 unless stated. The study's model (`nivpjax.scenes.fault`); dense kernels: the "
+        "study's files at 10x10 (3 km) and 20x20 (5 km x 4 km), the dense matrix of the "
+        "periodic kernel at other sizes.",
+        "",
+        "## Cost per step",
+        "",
+        "| kernel | cells N | unknowns | s / attempted step (wall) | CPU s / step | "
+        "Newton its / step | attempts | compile s | peak memory MB |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for s in r["steps"]:
+        if "per_step_s" not in s:
+            out.append(
+                f"| {s['kernel']} | {s.get('N', s['nx'] ** 2)} | | "
+                f"{s.get('skipped', s.get('error', '')[-80:])} | | | | | |"
+            )
+            continue
+        out.append(
+            f"| {s['kernel']} | {s['N']} | {3 * s['N']} | {_fmt(s['per_step_s'])} | "
+            f"{_fmt(s['per_step_cpu_s'])} | "
+            f"{_fmt(s['newton_per_step'], '.2f')} | {s['accepted'] + s['rejected']} | "
+            f"{_fmt(s['compile_s'], '.1f')} | {_fmt(s['maxrss_MB'], '.0f')} |"
+        )
+    out += [
+        "",
+        "## Where the time goes (one Newton iteration's parts, seconds)",
+        "",
+        "| kernel | cells N | residual (2 kernel products) | dense Jacobian (jacfwd) | LU solve |",
+        "|---|---|---|---|---|",
+    ]
+    for p in r["parts"]:
+        out.append(
+            f"| {p['kernel']} | {p.get('N', '')} | {_fmt(p.get('residual_s'))} | "
+            f"{_fmt(p.get('jacobian_s'))} | {_fmt(p.get('lu_s'))} |"
+        )
+    out += [
+        "",
+        "## Whole trajectories and the reference (t in [0, 34.641] or [0, 20.785], 30 s)",
+        "",
+        "Error: |mean final slip - truth| / truth, truth = nivpjax at the tight tolerance. "
+        "Times: nivpjax's second call (compile apart), the reference's one run; wall clock "
+        "and CPU time (process time, all threads): the machine is shared, so the CPU time "
+        "is the steadier measure and the ratio uses it.",
+        "",
+        "| cells | run | rtol | wall s | CPU s | compile s | steps (acc/rej) | "
+        "mean final slip | error | peak MB |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for c in r["compare"]:
+        truth = c["truth"].get("mean_slip")
+
+        def err(row):
+            if truth is None or row is None or "mean_slip" not in row:
+                return None
+            return abs(row["mean_slip"] - truth) / truth
+
+        for label, row in (
+            [("nivpjax truth", c["truth"])]
+            + [("nivpjax", x) for x in c["runs"]]
+            + [("reference", c["reference"])]
+        ):
+            if row is None:
+                continue
+            if "error" in row and "run_s" not in row:
+                out.append(
+                    f"| {c['nx']}x{c['nx']} | {label} | | {row['error'][-80:]} | | | | | | |"
+                )
+                continue
+            steps = (
+                f"{row['accepted']}/{row['rejected']}"
+                if "accepted" in row
+                else f"{row.get('steps')} acc."
+            )
+            out.append(
+                f"| {c['nx']}x{c['nx']} | {label} | {_fmt(row.get('rtol'), 'g')} | "
+                f"{_fmt(row['run_s'], '.3g')} | {_fmt(row.get('cpu_s'), '.3g')} | "
+                f"{_fmt(row.get('compile_s'), '.1f')} | {steps} | "
+                f"{_fmt(row.get('mean_slip'), '.6g')} | {_fmt(err(row), '.2e')} | "
+                f"{_fmt(row.get('maxrss_MB'), '.0f')} |"
+            )
+        ref = c["reference"]
+        if ref and "run_s" in ref and err(ref) is not None:
+            good = [x for x in c["runs"] if err(x) is not None and err(x) <= err(ref)]
+            if good:
+                best = min(good, key=lambda x: x["cpu_s"])
+                out.append("")
+                out.append(
+                    f"{c['nx']}x{c['nx']}: at equal or better accuracy, nivpjax rtol "
+                    f"{best['rtol']:g} takes {best['cpu_s']:.3g} CPU s against the "
+                    f"reference's {ref['cpu_s']:.3g}: **{ref['cpu_s'] / best['cpu_s']:.1f}x**."
+                )
+                out.append("")
+    return "\n".join(out) + "\n"
+
+
+def plot(r, path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4))
+    for kernel, marker in (("dense", "o"), ("spectral", "s")):
+        rows = [s for s in r["steps"] if s["kernel"] == kernel and "per_step_s" in s]
+        if not rows:
+            continue
+        n = np.array([s["N"] for s in rows])
+        axes[0].loglog(n, [s["per_step_s"] for s in rows], marker + "-", label=kernel)
+        axes[1].loglog(n, [s["maxrss_MB"] for s in rows], marker + "-", label=kernel)
+    axes[0].set(xlabel="cells N", ylabel="seconds per attempted step", title="cost per step")
+    axes[1].set(xlabel="cells N", ylabel="peak resident memory (MB)", title="memory")
+    for ax in axes:
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend()
+    fig.suptitle(f"fault, solver {r['solver']}")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+
+
+if __name__ == "__main__":
+    main()
