@@ -135,6 +135,22 @@ def test_cell_matches_coulomb_oscillator():
     assert errors[1] < 5e-4
 
 
+def test_cell_loaded_sticks_until_the_load_breaks_it():
+    # Loaded at v_inf = 0.1 from rest at u = 0: stuck (v = 0), u = -v_inf t and the friction
+    # carries k v_inf t + e v_inf, which reaches c = 0.5 at t* = (c - e v_inf)/(k v_inf) = 4.8
+    # (e = 2 zeta = 0.2); then the cell slips forward. Same executable (v_inf is traced).
+    args = dict(CELL_ARGS, v_inf=jnp.asarray(0.1))
+    ts = np.linspace(0.0, 6.0, 601)
+    sol = CELL_SOLVE(jnp.zeros(3), args, 6.0, _pid(1e-6), jnp.asarray(ts))
+    assert sol.result == nj.RESULTS.successful
+    y = np.asarray(sol.y_eval)
+    stuck = ts < 4.8 - 1e-2
+    assert np.max(np.abs(y[stuck, 0])) < 1e-12
+    assert np.allclose(y[stuck, 1], -0.1 * ts[stuck], rtol=0, atol=1e-9)
+    moving = np.flatnonzero(y[:, 0] > 1e-6)
+    assert moving.size and abs(ts[moving[0]] - 4.8) < 3e-2
+
+
 # --------------------------------------------------------------------------------------------
 # The spectral kernel: a periodic 6 x 4 grid on a 1 x 2/3 box, Poisson's ratio 0.25.
 
