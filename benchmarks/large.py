@@ -91,7 +91,8 @@ def periodic_dense(nx, nz, lx, lz):
 
     sym = spectral_symbol(nx, nz, lx, lz)
     n = nx * nz
-    return np.stack([spectral_apply_np(sym, e, nx, nz) for e in np.eye(n)], axis=1)
+    K = np.stack([spectral_apply_np(sym, e, nx, nz) for e in np.eye(n)], axis=1)
+    return 0.5 * (K + K.T)
 
 
 def make_solve(scene, solver_expr, max_steps, save_final=True):

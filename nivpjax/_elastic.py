@@ -14,7 +14,7 @@ def dense_root(K):
     K = np.asarray(K, dtype=float)
     if K.ndim != 2 or K.shape[0] != K.shape[1]:
         raise ValueError(f"`kernel` must be a square matrix, got shape {K.shape}.")
-    if not np.allclose(K, K.T, rtol=1e-10, atol=0.0):
+    if not np.allclose(K, K.T, rtol=1e-10, atol=1e-12 * np.abs(K).max()):
         raise ValueError("`kernel` must be symmetric.")
     lam, Q = np.linalg.eigh(0.5 * (K + K.T))
     if lam[0] <= 0:

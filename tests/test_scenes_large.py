@@ -215,6 +215,19 @@ def test_spectral_kernel_is_half_wavenumber_on_a_mode():
     assert np.allclose(Rv, np.sqrt(k / 2) * u, rtol=0, atol=1e-12)
 
 
+def test_bad_kernels_raise_before_any_work():
+    with pytest.raises(ValueError, match="symmetric"):
+        scenes.fault(np.array([[1.0, 0.5], [0.0, 1.0]]), 2, 1)
+    with pytest.raises(ValueError, match="positive definite"):
+        scenes.fault(-np.eye(4))
+    with pytest.raises(ValueError, match="`kernel` must be \\(9, 9\\)"):
+        scenes.fault(np.eye(4), 3, 3)
+    with pytest.raises(ValueError, match="k_floor"):
+        scenes.fault("spectral", 4, 4, k_floor=0.0)
+    with pytest.raises(ValueError, match="'spectral' or a square matrix"):
+        scenes.fault("fft")
+
+
 # --------------------------------------------------------------------------------------------
 # The study's 2 x 2 fault (3 km patch) against a regularised Radau integration.
 
