@@ -9,6 +9,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ._elastic import dense_root, spectral_apply, spectral_apply_np, spectral_symbol
 from ._projector import SecondOrderCone
 from ._scene import Contact, Diode, Friction, Relay, Saturation, Scene, SetValued
 
@@ -329,3 +330,268 @@ def ball_in_bowl(
     x0 = _f([*position, *velocity])
     args = {"R": _f(radius), "g": _f(gravity), "e": _f(restitution)}
     return Scene(dynamics, 2 * d, (contact,)), x0, args
+
+
+def fault_units(length=3.0, shear_modulus=3e4, density=2.5e-3, slip_unit=0.1):
+    r"""The units of [`nivpjax.scenes.fault`][]'s nondimensional variables, as the study
+    sets them (lengths in mm, stresses in MPa, times in ms, densities in g/mm$^3$): the
+    patch length $L$ (`length` in km), the slip unit $D$ (`slip_unit` in mm), the stress
+    unit $G D / L$, the time unit $L / c_s$ with $c_s = \sqrt{G/\rho}$, and the velocity
+    unit $D c_s / L$. Returns a dict `{"length_mm", "slip_mm", "stress_MPa", "time_ms",
+    "velocity_mm_per_ms"}`; e.g. $L = 3$ km: stress 1e-3 MPa, time 866.03 ms."""
+    L = length * 1e6
+    c_s = np.sqrt(shear_modulus / density)
+    return dict(
+        length_mm=L,
+        slip_mm=slip_unit,
+        stress_MPa=shear_modulus * slip_unit / L,
+        time_ms=L / c_s,
+        velocity_mm_per_ms=slip_unit * c_s / L,
+    )
+
+
+def load_fault_kernel(path):
+    r"""The study's stiffness kernel from one of its `.npy` files (`kijs_*.npy`, stress
+    per unit slip and shear modulus in 1/km): $-10^{-6} \times$ file, in 1/mm, a symmetric
+    positive definite matrix for [`nivpjax.scenes.fault`][] (which rescales it; see there).
+    Cells are ordered $p = i_x + i_z n_x$."""
+    K = -1e-6 * np.load(path)
+    if K.ndim != 2 or K.shape[0] != K.shape[1]:
+        raise ValueError(f"the kernel in {path!r} must be a square matrix, got {K.shape}.")
+    return K
+
+
+def _fault_grid(kernel, nx, nz):
+    if isinstance(kernel, str):
+        if kernel != "spectral":
+            raise ValueError(f"`kernel` must be 'spectral' or a square matrix, got {kernel!r}.")
+        nx, nz = (32 if nx is None else nx), (32 if nz is None else nz)
+        return nx, nz
+    n = np.shape(kernel)[0]
+    if nx is None and nz is None:
+        nx = nz = int(round(np.sqrt(n)))
+    elif nx is None or nz is None:
+        nx, nz = (n // nz, nz) if nx is None else (nx, n // nx)
+    if nx * nz != n or np.shape(kernel) != (n, n):
+        raise ValueError(
+            f"`kernel` must be ({nx * nz}, {nx * nz}) for nx={nx}, nz={nz}, got {np.shape(kernel)}."
+        )
+    return nx, nz
+
+
+def fault(
+    kernel="spectral",
+    nx=None,
+    nz=None,
+    *,
+    length=3.0,
+    depth=3.0,
+    zeta=0.8 / 3,
+    mu_res=0.5,
+    delta_mu=0.1,
+    Dc=1000.0,
+    v_inf=0.0,
+    overshoot=1e-5,
+    sigma=None,
+    sigma_gradient=15.0,
+    shear_modulus=3e4,
+    slip_unit=0.1,
+    normalise=True,
+    poisson=0.0,
+    k_floor=None,
+):
+    r"""A vertical strike-slip fault patch of $N = n_x n_z$ frictional cells (the reference's
+    companion study), nondimensional, cells ordered $p = i_x + i_z n_x$ ($i_z = 0$ at the
+    top):
+
+    $$ \begin{gathered}
+       v' = -K u - E (v - v_\infty) - r, \qquad r \in \mu(s)\,\sigma\,\partial|v|, \\
+       u' = v - v_\infty, \qquad s' = |v|, \qquad
+       \mu(s) = \mu_r + \Delta\mu\, e^{-s/D_c}, \qquad E = 2\zeta K^{1/2},
+       \end{gathered} $$
+
+    slip rate $v$, displacement $u$ relative to the load point (driven at $v_\infty$) and
+    cumulated slip $s$ per cell, Coulomb friction with a slip-weakening bound on each cell
+    ([`nivpjax.Friction`][] on the $N$ velocities), modal damping $E$ (symmetric square
+    root). State $x = (v_0..v_{N-1}, u_0..u_{N-1}, s_0..s_{N-1})$ (three blocks).
+
+    **Units** ([`nivpjax.scenes.fault_units`][]): slip by $D$ = `slip_unit` (0.1 mm),
+    lengths by $L$ = `length` (the patch's length along strike, km), stresses by $G D/L$,
+    times by $L/c_s$; the inertia per unit area is then 1. The effective normal stress is
+    $\sigma = $ `sigma_gradient` $\times z$ MPa at each cell's centre depth $z$ (km),
+    divided by the stress unit (`sigma` overrides it: a scalar or one value per cell).
+
+    **Kernel** $K$ (stress per unit slip, nondimensional):
+
+    - a dense symmetric positive definite matrix (the study's form; e.g.
+      [`nivpjax.scenes.load_fault_kernel`][] of its files). $K^{1/2}$ by `eigh`. A step
+      costs two $O(N^2)$ products $K u$, $K^{1/2} v$ per residual evaluation.
+    - `"spectral"`: a periodic fault of `length` $\times$ `depth`, $K = F^{-1}
+      \mathrm{diag}(\lambda) F$ with the quasi-static symbol of
+      `nivpjax._elastic.spectral_symbol` ($|k|/2$ for `poisson=0`, floored at `k_floor`);
+      $K^{1/2}$ has the symbol $\sqrt\lambda$, so a residual costs $O(N \log N)$.
+
+    With `normalise=True` (the study's convention) $K$ is scaled by the one factor that
+    makes $\overline{K^{-1}\sigma} = \bar\sigma$ (one cell: $K = 1$; any scalar factor of
+    the kernel passed in, its sign included, drops out). The initial state is the
+    study's: $v = s = 0$, $u = (1 + \text{overshoot})\, u_c$, $u_c = -K^{-1}\mu(0)\sigma$,
+    each cell just past its static limit, so that one rupture nucleates, spreads and
+    arrests. The study runs $t \in [0, 34.641]$ (30 s at $L$ = 3 km).
+
+    A note on $s' = |v|$: in a stick $v = 0$ exactly (the friction's projection), where
+    $|v|$ has a kink; $s$ is still $C^1$ in time between switches, and Newton takes the
+    element $\operatorname{sign}(0) = 0$ of its generalised derivative there, which is
+    exact on a stuck cell.
+
+    `args`: `K` and `R` ($K^{1/2}$) for a dense kernel, `symbol` for the spectral one, and
+    `zeta, mu_res, delta_mu, Dc, sigma, v_inf` (arrays: `vmap` and `grad` over any).
+    """
+    nx, nz = _fault_grid(kernel, nx, nz)
+    n = nx * nz
+    units = fault_units(length, shear_modulus, slip_unit=slip_unit)
+    depths = (np.arange(n) // nx + 0.5) * depth / nz
+    if sigma is None:
+        sigma = sigma_gradient * depths / units["stress_MPa"]
+    sigma = np.broadcast_to(np.asarray(sigma, dtype=float), (n,))
+    spectral = isinstance(kernel, str)
+    if spectral:
+        symbol = spectral_symbol(nx, nz, 1.0, depth / length, poisson, k_floor)
+
+        def solve_K(b):
+            return spectral_apply_np(1.0 / symbol, b, nx, nz)
+
+    else:
+        K = np.asarray(kernel, dtype=float)
+        dense_root(K)  # symmetric positive definite, checked before any work
+
+        def solve_K(b):
+            return np.linalg.solve(K, b)
+
+    scale = np.mean(solve_K(sigma)) / np.mean(sigma) if normalise else 1.0
+    u_c = -solve_K((mu_res + delta_mu) * sigma) / scale
+    if spectral:
+        kernel_args = {"symbol": _f(scale * symbol)}
+    else:
+        kernel_args = {"K": _f(scale * K), "R": _f(dense_root(scale * K))}
+
+    def apply(a, w, root):
+        if spectral:
+            sym = jnp.sqrt(a["symbol"]) if root else a["symbol"]
+            return spectral_apply(sym.astype(w.dtype), w, nx, nz)
+        return (a["R"] if root else a["K"]) @ w
+
+    def dynamics(t, x, a, m):
+        v, u = x[:n], x[n : 2 * n]
+        slip_rate = v - a["v_inf"]
+        dv = -apply(a, u, False) - 2 * a["zeta"] * apply(a, slip_rate, True)
+        return jnp.concatenate([dv, slip_rate, jnp.abs(v)])
+
+    def bound(t, x, a):
+        return (a["mu_res"] + a["delta_mu"] * jnp.exp(-x[2 * n :] / a["Dc"])) * a["sigma"]
+
+    scene = Scene(dynamics, 3 * n, (Friction(velocities=np.arange(n), bound=bound),))
+    x0 = np.concatenate([np.zeros(n), (1 + overshoot) * u_c, np.zeros(n)])
+    args = dict(
+        kernel_args,
+        zeta=_f(zeta),
+        mu_res=_f(mu_res),
+        delta_mu=_f(delta_mu),
+        Dc=_f(Dc),
+        sigma=_f(sigma),
+        v_inf=_f(v_inf),
+    )
+    return scene, _f(x0), args
+
+
+def spring_block_chain(
+    n=40,
+    mass=1.0,
+    coupling=1.0,
+    stiffness=1.0,
+    damping=0.0,
+    normal=1.0,
+    mu_static=0.6,
+    mu_kinetic=0.3,
+    slip_scale=1.0,
+    drive_velocity=0.1,
+    perturbation=1e-2,
+    seed=0,
+):
+    r"""A Burridge–Knopoff chain: `n` blocks, each on a spring $k_p$ to a load point driven
+    at $V$, neighbours joined by springs $k_c$ (free ends), Coulomb friction with slip
+    weakening on every block:
+
+    $$ m s_i'' = k_c (s_{i+1} - 2 s_i + s_{i-1}) + k_p (V t - s_i) - c\, s_i'
+       - \mu(s_i) N \operatorname{Sign}(s_i'), \quad
+       \mu(s) = \mu_k + (\mu_s - \mu_k) e^{-|s|/D_c}, $$
+
+    (the missing neighbour of an end block is replaced by the block itself). One block is
+    [`nivpjax.scenes.spring_slider`][]. State $x = (s_0..s_{n-1}, v_0..v_{n-1})$, friction
+    on the $n$ velocities ([`nivpjax.Friction`][], no extra states); the blocks start at
+    rest, displaced by `perturbation` $\times$ uniform$(-1, 1)$ draws (`seed`), which
+    breaks the symmetry between them. `args`: `m, kc, kp, c, N, mu_s, mu_k, Dc, V`.
+    """
+    if n < 1:
+        raise ValueError(f"`n` must be a positive number of blocks, got {n}.")
+
+    def dynamics(t, x, a, m):
+        s, v = x[:n], x[n:]
+        padded = jnp.concatenate([s[:1], s, s[-1:]])
+        coupling_force = a["kc"] * (padded[2:] - 2 * s + padded[:-2])
+        force = coupling_force + a["kp"] * (a["V"] * t - s) - a["c"] * v
+        return jnp.concatenate([v, force / a["m"]])
+
+    def bound(t, x, a):
+        mu = a["mu_k"] + (a["mu_s"] - a["mu_k"]) * jnp.exp(-jnp.abs(x[:n]) / a["Dc"])
+        return mu * a["N"] / a["m"]
+
+    scene = Scene(dynamics, 2 * n, (Friction(velocities=np.arange(n, 2 * n), bound=bound),))
+    s0 = perturbation * np.random.default_rng(seed).uniform(-1.0, 1.0, n)
+    args = dict(
+        m=_f(mass),
+        kc=_f(coupling),
+        kp=_f(stiffness),
+        c=_f(damping),
+        N=_f(normal),
+        mu_s=_f(mu_static),
+        mu_k=_f(mu_kinetic),
+        Dc=_f(slip_scale),
+        V=_f(drive_velocity),
+    )
+    return scene, _f(np.concatenate([s0, np.zeros(n)])), args
+
+
+def chain_of_balls(n=100, radius=0.5, restitution=1.0, spacing=0.0, velocity=1.0):
+    r"""A horizontal chain of `n` unit balls of radius $r$ on a line (no gravity), the
+    first one thrown at the others with `velocity`: gaps $q_{i+1} - q_i - 2r \ge 0$,
+    Newton restitution $e$ at every contact (`n - 1` contacts, simultaneous when the
+    balls touch; as in Siconos' ChainOfBalls). State $x = (q_0..q_{n-1}, v_0..v_{n-1})$.
+
+    Momentum $\sum v_i$ is kept by every impact. With `spacing > 0` and $e = 1$ the
+    impacts come one at a time, each an exchange of velocities (Newton's cradle): the
+    last ball leaves with `velocity` at $t = (n - 1)\,d/v_0$ ($d$ = `spacing`) and the
+    others rest, energy kept. With `spacing=0` all contacts are closed at once and the
+    velocity-level impact law decides them together (with $e = 0$ the chain moves on as
+    one body at $v_0/n$). `args = {"e": e}`.
+    """
+    if n < 2:
+        raise ValueError(f"`n` must be at least 2 balls, got {n}.")
+
+    def dynamics(t, x, a, m):
+        return jnp.concatenate([x[n:], jnp.zeros(n, x.dtype)])
+
+    def gap(t, x, a):
+        q = x[:n]
+        return q[1:] - q[:-1] - 2 * radius
+
+    contact = Contact(
+        gap,
+        positions=np.arange(n),
+        velocities=np.arange(n, 2 * n),
+        restitution=lambda t, y, a: a["e"],
+    )
+    q0 = np.arange(n) * (2 * radius + spacing)
+    v0 = np.zeros(n)
+    v0[0] = velocity
+    x0 = _f(np.concatenate([q0, v0]))
+    return Scene(dynamics, 2 * n, (contact,)), x0, {"e": _f(restitution)}
