@@ -521,9 +521,10 @@ def spring_block_chain(
     at $V$, neighbours joined by springs $k_c$ (free ends), Coulomb friction with slip
     weakening on every block:
 
-    $$ m s_i'' = k_c (s_{i+1} - 2 s_i + s_{i-1}) + k_p (V t - s_i) - c\, s_i'
-       - \mu(s_i) N \operatorname{Sign}(s_i'), \quad
-       \mu(s) = \mu_k + (\mu_s - \mu_k) e^{-|s|/D_c}, $$
+    $$ \begin{gathered}
+       m s_i'' = k_c (s_{i+1} - 2 s_i + s_{i-1}) + k_p (V t - s_i) \\
+       - c\, s_i' - \mu(s_i) N \operatorname{Sign}(s_i'), \\
+       \mu(s) = \mu_k + (\mu_s - \mu_k) e^{-|s|/D_c}, \end{gathered} $$
 
     (the missing neighbour of an end block is replaced by the block itself). One block is
     [`nivpjax.scenes.spring_slider`][]. State $x = (s_0..s_{n-1}, v_0..v_{n-1})$, friction
