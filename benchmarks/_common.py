@@ -33,8 +33,9 @@ def time_once(fn, *args):
     return time.perf_counter() - t0, out
 
 
-def median_time(fn, *args, repeats=5, number=1, setup=None):
-    """Median over `repeats` of the mean time of `number` back-to-back calls.
+def median_time(fn, *args, repeats=5, number=1, setup=None, reduce=statistics.median):
+    """Median over `repeats` of the mean time of `number` back-to-back calls (`reduce`:
+    another statistic of the repeats, e.g. `min` on a shared machine).
 
     `setup()` (optional) is called before each repeat, outside the timed region, and its
     return value is passed as the first argument (used for the reference's stateful solver
@@ -46,7 +47,7 @@ def median_time(fn, *args, repeats=5, number=1, setup=None):
         for _ in range(number):
             out = block(fn(*pre, *args))
         times.append((time.perf_counter() - t0) / number)
-    return statistics.median(times), out
+    return reduce(times), out
 
 
 def auto_number(fn, *args, target=0.05, setup=None):

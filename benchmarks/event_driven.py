@@ -13,6 +13,7 @@ event-driven stepper too ("after"). Writes benchmarks/results/event_driven.md.
 """
 
 import argparse
+import functools
 import os
 import time
 from pathlib import Path
@@ -25,7 +26,7 @@ import numpy as np
 import nivpjax as nj
 
 from . import regularised, work_precision as wp
-from ._common import block
+from ._common import block, median_time
 from .cases import CASES, chua_reference
 
 
@@ -33,17 +34,9 @@ RTOLS = (1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8)
 PEER_RTOLS = (1e-3, 1e-5, 1e-7)
 
 
-def _fastest(fn, *args, repeats=5, number=1, setup=None):
-    # `median_time`'s signature, the fastest repeat instead of the median: on a shared
-    # machine the least disturbed one (applied to every method alike).
-    times = []
-    for _ in range(repeats):
-        pre = () if setup is None else (setup(),)
-        t0 = time.perf_counter()
-        for _ in range(number):
-            out = block(fn(*pre, *args))
-        times.append((time.perf_counter() - t0) / number)
-    return min(times), out
+# The fastest repeat instead of the median: on a shared machine the least disturbed one
+# (applied to every method alike).
+_fastest = functools.partial(median_time, reduce=min)
 
 
 def run(name, scipy, repeats, log):
