@@ -106,7 +106,9 @@ _DEFAULTS = {}
 
 def _default(name, cls):
     # Modules are immutable: one default instance serves every call (building one costs
-    # tens of microseconds, a noticeable part of a cached call).
+    # tens of microseconds, a noticeable part of a cached call). The first solve may run
+    # inside a user's `jit` and the instance outlives that trace, so a default must hold no
+    # tracer: `runtime_float` makes its scalar fields concrete even there.
     if name not in _DEFAULTS:
         _DEFAULTS[name] = cls()
     return _DEFAULTS[name]

@@ -245,3 +245,50 @@ def test_filter_jit_with_options_works_at_top_level_and_nested():
     for y in (traced, constant):
         np.testing.assert_allclose(y, top, rtol=1e-13)
     np.testing.assert_allclose(top, np.exp(-1.5) * np.asarray(Y0), rtol=0.1)
+
+
+def test_two_outer_jits_each_called_twice_with_defaults_built_under_the_first(monkeypatch):
+    # The first solve of a process built the default controller inside the user's jit: its
+    # run-time tolerances were tracers of that trace, cached for every later solve. A
+    # second outer jit then captured the dead tracers as constants and failed on its second
+    # call ("Execution supplied 1 arguments but compiled program expected 6"), on JAX's
+    # C++ fast path. An empty cache of defaults makes this test's first solve that one.
+    from nivpjax import _validate
+
+    monkeypatch.setattr(_validate, "_DEFAULTS", {})
+
+    def field(t, y, args):
+        return -args * y
+
+    def outer(rate):  # `rate` concrete: a constant captured by the outer program
+        return jax.jit(
+            lambda y0: (
+                nj.solve(field, 0.0, 1.0, y0, rate, stepper=nj.BackwardEuler(), max_steps=256).ys
+            )
+        )
+
+    for k in (1.0, 2.0):
+        rate = jnp.array([k, 2.0 * k])
+        f = outer(rate)
+        runs = [f(Y0) for _ in range(2)]
+        direct = _solve(field, args=rate).ys
+        for ys in runs:
+            np.testing.assert_allclose(ys, direct, rtol=1e-13, atol=1e-15)
+    assert not isinstance(_validate._DEFAULTS["controller"].rtol, jax.core.Tracer)
+
+
+def test_runtime_floats_of_a_module_built_under_jit_are_concrete():
+    # A module built inside a trace and kept (by the user, or nivpjax's defaults) must
+    # not carry that trace's tracers into later programs.
+    built = []
+
+    def make(x):
+        built.append(nj.PIDController(rtol=1e-4, h_max=0.5))
+        return x
+
+    jax.jit(make)(1.0)
+    (controller,) = built
+    for value, expected in ((controller.rtol, 1e-4), (controller.h_max, 0.5)):
+        assert not isinstance(value, jax.core.Tracer)
+        assert value.weak_type
+        assert float(value) == expected
