@@ -292,3 +292,19 @@ def test_runtime_floats_of_a_module_built_under_jit_are_concrete():
         assert not isinstance(value, jax.core.Tracer)
         assert value.weak_type
         assert float(value) == expected
+
+
+def test_learning_task_scenes_built_under_jit_hold_no_tracer():
+    # The tasks' scenes are cached for the process; a sampler may build one first inside
+    # a jit. Its parameters must be concrete there, or the next trace takes the dead
+    # tracers as constants (the second-jit failure of `runtime_float`'s test above).
+    from nivpjax.learn import tasks
+
+    tasks._scene.cache_clear()
+    key = jax.random.PRNGKey(0)
+    first = jax.jit(tasks._slider_sample)(key)
+    args = tasks._scene("slider")[2]
+    assert not any(isinstance(v, jax.core.Tracer) for v in jax.tree.leaves(args))
+    second = jax.jit(lambda k: tasks._slider_sample(k))(key)
+    for a, b in zip(jax.tree.leaves(first), jax.tree.leaves(second)):
+        np.testing.assert_array_equal(a, b)

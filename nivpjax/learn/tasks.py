@@ -5,6 +5,7 @@ programs."""
 
 import functools
 
+import jax
 import jax.numpy as jnp
 import jax.random as jr
 
@@ -18,6 +19,14 @@ def _uniform(key, lo, hi):
 
 @functools.cache
 def _scene(name):
+    # Cached for the process and possibly first built inside a trace (the samplers run
+    # under jit): its arrays must be concrete, never that trace's tracers, which a later
+    # trace would take silently as constants (see `nivpjax._custom_types.runtime_float`).
+    with jax.ensure_compile_time_eval():
+        return _build_scene(name)
+
+
+def _build_scene(name):
     if name == "ball":
         return scenes.bouncing_ball()
     if name == "slider":
