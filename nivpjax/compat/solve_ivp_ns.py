@@ -1,5 +1,6 @@
 """`solve_ivp_ns`: the reference package's entry point, on top of `nivpjax.solve`."""
 
+import functools
 import inspect
 
 import jax
@@ -201,6 +202,18 @@ def _stepper(name, solver, iopts):
     return EmbeddedBETR(solver=solver)
 
 
+def _in_float64(fn):
+    # The reference computes in float64 (`np.array(y0, dtype=float)`), whatever the
+    # caller's dtype: so does the drop-in, with x64 on for the call only (it returns NumPy
+    # arrays, so no float64 JAX array leaks out).
+    @functools.wraps(fn)
+    def wrapper(*args, **kwargs):
+        with jax.enable_x64(True):
+            return fn(*args, **kwargs)
+
+    return wrapper
+
+
 def _controller(adaptive, aopts, atol, rtol, h0, n, skip, component_slices, algebraic):
     opt.check("adaptive_opts", aopts, opt.ADAPTIVE_MAPPED, opt.ADAPTIVE_NO_EFFECT)
     h0 = float(aopts.get("h0", h0))
@@ -253,6 +266,7 @@ def _controller(adaptive, aopts, atol, rtol, h0, n, skip, component_slices, alge
     return controller, h0
 
 
+@_in_float64
 def solve_ivp_ns(
     fun,
     t_span,
@@ -344,62 +358,6 @@ def solve_ivp_ns(
         raise ValueError(f"`t_span` must be a pair (t0, tf), got {t_span!r}.") from None
     if not callable(fun) or _n_positional(fun) < 2:
         raise ValueError("`fun` must accept (t, y).")
-    # The reference computes in float64 (`np.array(y0, dtype=float)`), whatever the caller's
-    # dtype: so does the drop-in, with x64 on for this call only (it returns NumPy arrays,
-    # so no float64 JAX array leaks out).
-    with jax.enable_x64(True):
-        return _solve_float64(
-            fun,
-            t0,
-            t1,
-            y0,
-            method.lower(),
-            pname,
-            solver.lower(),
-            projection_opts,
-            solver_opts,
-            integrator_opts,
-            adaptive_opts,
-            adaptive,
-            atol,
-            rtol,
-            h0,
-            component_slices,
-            verbose,
-            A,
-            skip_error_indices,
-            return_attempts,
-            max_steps,
-            throw,
-            t_eval,
-        )
-
-
-def _solve_float64(
-    fun,
-    t0,
-    t1,
-    y0,
-    method,
-    pname,
-    solver,
-    projection_opts,
-    solver_opts,
-    integrator_opts,
-    adaptive_opts,
-    adaptive,
-    atol,
-    rtol,
-    h0,
-    component_slices,
-    verbose,
-    A,
-    skip_error_indices,
-    return_attempts,
-    max_steps,
-    throw,
-    t_eval,
-):
     try:
         y0 = np.atleast_1d(np.array(y0, dtype=np.float64))
     except (TypeError, ValueError):
@@ -412,8 +370,8 @@ def _solve_float64(
     rhs = _host.adapt(fun, "fun", "(t, y)", (t0, y0), (n,), hosted)
     projector = _projector(pname, projection_opts, n, component_slices, t0, y0, hosted)
     _host.warn_once(hosted)
-    nl_solver = _solver(solver, solver_opts)
-    stepper = _stepper(method, nl_solver, integrator_opts)
+    nl_solver = _solver(solver.lower(), solver_opts)
+    stepper = _stepper(method.lower(), nl_solver, integrator_opts)
     algebraic = np.zeros(n, bool) if A is None else np.all(np.asarray(A) == 0, axis=1)
     controller, h_init = _controller(
         adaptive,
@@ -447,6 +405,11 @@ def _solve_float64(
         throw=throw,
         progress=bool(verbose),
     )
+    return _outputs(sol, t_eval, return_attempts)
+
+
+def _outputs(sol, t_eval, return_attempts):
+    """The reference's return tuple from a [`nivpjax.Solution`][], as NumPy arrays."""
     # Cut on the host: slicing device arrays to a data-dependent length would compile a new
     # slice program for every step count (most of a repeated call's time).
     rows = int(sol.n_accepted) + 1
