@@ -105,8 +105,10 @@ def fit(
     _check(params0, solver, max_steps, sigma)
     p0, unravel = ravel_pytree(params0)
 
-    def residual(p):
+    def plain(p):
         return jnp.ravel(residual_fn(unravel(p), args)).astype(p.dtype)
+
+    residual = _jacobian_once(plain)
 
     def fn(p, _):
         return residual(p), None
@@ -114,12 +116,29 @@ def fit(
     def cost(p):
         return 0.5 * jnp.sum(residual(p) ** 2)
 
-    f_struct = jax.eval_shape(residual, p0)
+    p, state, steps, history, result = _iterate(solver, fn, cost, p0, max_steps)
+    if throw:
+        p = result.error_if(p, result != optx.RESULTS.successful)
+    info = _kept(state)
+    if info is None:
+        J, r = _jacobian_and_value(plain, p)
+    else:
+        J, r = info.jac.as_matrix(), jnp.ravel(info.residual)
+    return _finish(J, r, p, unravel, sigma, steps, history, result)
+
+
+def _iterate(solver, fn, cost, p0, max_steps):
+    f_struct = jax.eval_shape(lambda p: fn(p, None)[0], p0)
     tags = frozenset()
     state = solver.init(fn, p0, None, {}, f_struct, None, tags)
     done, result = solver.terminate(fn, p0, None, {}, state, tags)
-    history = jnp.full((max_steps + 1,), jnp.nan, p0.dtype).at[0].set(cost(p0))
-
+    # The Gauss-Newton family keeps the residual and the linearisation at the point its
+    # step returns (`_kept`); its first step returns `params0` itself, so the start's cost
+    # is the first step's. Reading them instead of evaluating keeps one linearised solve
+    # in the compiled program, not three (the compile time a calibration pays).
+    kept = _kept(state) is not None
+    history = jnp.full((max_steps + 1,), jnp.nan, p0.dtype)
+    history = history.at[0].set(jnp.nan if kept else cost(p0))
     # The solver state holds linearisations (jaxprs): carry only its arrays.
     dynamic, static = eqx.partition(state, eqx.is_array)
 
@@ -132,31 +151,55 @@ def fit(
         state = eqx.combine(dynamic, static)
         p, state, _ = solver.step(fn, p, None, {}, state, tags)
         done, result = solver.terminate(fn, p, None, {}, state, tags)
-        dynamic = eqx.filter(state, eqx.is_array)
-        return p, dynamic, done, result, k + 1, history.at[k + 1].set(_cost_at(state, p, cost))
+        if kept:
+            c = 0.5 * jnp.sum(jnp.ravel(_kept(state).residual) ** 2)
+            history = history.at[0].set(jnp.where(k == 0, c, history[0]))
+        else:
+            c = cost(p)
+        history = history.at[k + 1].set(c)
+        return p, eqx.filter(state, eqx.is_array), done, result, k + 1, history
 
     init = (p0, dynamic, done, result, jnp.zeros((), jnp.int32), history)
-    p, _, done, result, steps, history = jax.lax.while_loop(cond, body, init)
+    p, dynamic, done, result, steps, history = jax.lax.while_loop(cond, body, init)
     result = optx.RESULTS.where(done, result, optx.RESULTS.nonlinear_max_steps_reached)
-    if throw:
-        p = result.error_if(p, result != optx.RESULTS.successful)
-    return _finish(residual, p, unravel, sigma, steps, history, result)
+    return p, eqx.combine(dynamic, static), steps, history, result
 
 
-def _cost_at(state, p, cost):
-    # optimistix's Gauss-Newton family (GaussNewton, LevenbergMarquardt, Dogleg) keeps the
-    # residual at the point its step returns in its state: reading it saves one solve per
-    # iteration (and one copy of the solve in the compiled program). Other solvers
-    # evaluate it.
-    residual = getattr(getattr(state, "f_info", None), "residual", None)
-    if residual is None:
-        return cost(p)
-    return 0.5 * jnp.sum(jnp.ravel(residual) ** 2)
-
-
-def _finish(residual, p, unravel, sigma, steps, history, result):
+def _jacobian_and_value(residual, p):
     # The Jacobian's forward pass computes the residual too: one solve, not two.
-    J, r = jax.jacfwd(lambda q: (lambda out: (out, out))(residual(q)), has_aux=True)(p)
+    return jax.jacfwd(lambda q: (lambda out: (out, out))(residual(q)), has_aux=True)(p)
+
+
+def _jacobian_once(residual):
+    # The residual with a JVP rule that materialises the Jacobian (one tangent per
+    # parameter, forward mode through the solve) and applies it. A linearisation of it
+    # keeps J as a constant, so the solver's several uses of the linear map (its
+    # materialisation, the trust region's predicted reduction, the covariance) are
+    # products with J, not copies of the solve's tangent program.
+    @jax.custom_jvp
+    def wrapped(p):
+        return residual(p)
+
+    @wrapped.defjvp
+    def _jvp(primals, tangents):
+        (p,), (dp,) = primals, tangents
+        J, r = _jacobian_and_value(residual, p)
+        return r, J @ dp
+
+    return wrapped
+
+
+def _kept(state):
+    # optimistix's Gauss-Newton family (GaussNewton, LevenbergMarquardt, Dogleg) keeps the
+    # residual at the point its step returns, and its linearisation there, in `f_info`.
+    # Other solvers (BestSoFarLeastSquares, ...) keep something else: None.
+    info = getattr(state, "f_info", None)
+    if isinstance(info, optx.FunctionInfo.ResidualJac):
+        return info
+    return None
+
+
+def _finish(J, r, p, unravel, sigma, steps, history, result):
     m, n = J.shape
     if sigma is None:
         sigma = jnp.sqrt(jnp.sum(r**2) / max(m - n, 1))

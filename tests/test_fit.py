@@ -127,4 +127,48 @@ def test_fit_history_ends_at_the_cost_of_the_result(solver):
     history = np.asarray(out.history)
     expected = 0.5 * np.sum(np.asarray(residuals(out.params, None)) ** 2)
     np.testing.assert_allclose(history[steps], expected, rtol=1e-10, atol=1e-30)
+    start = 0.5 * np.sum(np.asarray(residuals(jnp.array([-1.2, 1.0]), None)) ** 2)
+    np.testing.assert_allclose(history[0], start, rtol=1e-12)
+    np.testing.assert_allclose(out.residuals, residuals(out.params, None), rtol=1e-12)
+    J = jax.jacfwd(residuals)(out.params, None)
+    np.testing.assert_allclose(out.jacobian, J, rtol=1e-10, atol=1e-12)
     np.testing.assert_allclose(out.params, [1.0, 1.0], atol=1e-6)
+
+
+def _count(jaxpr, name):
+    n = 0
+    for eqn in jaxpr.eqns:
+        n += eqn.primitive.name == name
+        for value in eqn.params.values():
+            for sub in value if isinstance(value, (list, tuple)) else [value]:
+                inner = getattr(sub, "jaxpr", sub)
+                if hasattr(inner, "eqns"):
+                    n += _count(inner, name)
+    return n
+
+
+@pytest.mark.parametrize(
+    "solver",
+    [optx.LevenbergMarquardt(rtol=1e-8, atol=1e-8), optx.Dogleg(rtol=1e-8, atol=1e-8)],
+)
+def test_fit_program_holds_the_residual_once(solver):
+    # A residual with one while loop (as a solve has): the fit's program holds the fit's
+    # own loop and one copy of the residual's, inside the Jacobian the solver's steps and
+    # the covariance share. Evaluating the start's cost, the solver's linear map and the
+    # final Jacobian separately would each add a copy (a solve's compile time each).
+    def residuals(p, args):
+        def body(carry):
+            i, y = carry
+            return i + 1, y + 0.01 * p[0] * y
+
+        _, y = jax.lax.while_loop(lambda c: c[0] < args["n"], body, (0, jnp.ones(3)))
+        return y + p[1] - args["data"]
+
+    args = {"n": jnp.asarray(10), "data": jnp.arange(3.0)}
+    p0 = jnp.array([0.1, 0.2])
+    jaxpr = jax.make_jaxpr(lambda p: nj.fit(residuals, p, args, solver=solver))(p0).jaxpr
+    assert _count(jaxpr, "while") == 1 + 1
+    out = nj.fit(residuals, p0, args, solver=solver, max_steps=100)
+    np.testing.assert_allclose(out.jacobian, jax.jacfwd(residuals)(out.params, args), rtol=1e-12)
+    cost0 = 0.5 * np.sum(np.asarray(residuals(p0, args)) ** 2)
+    np.testing.assert_allclose(out.history[0], cost0, rtol=1e-12)
