@@ -181,9 +181,9 @@ def _relay_crossing_exact(x0, b, a, T):
 
 
 @jax.jit
-def _relay_fixed_final(x0, b):
+def _relay_fixed(x0, b):
     # Constant steps of 0.05 from t = 0 reach the switch of x' = -w + b (x0 = -0.5, b = 1.5:
-    # tau = 0.2) after four steps.
+    # tau = 0.2) after four steps. Returns x(T) and x at 0.19 and 0.198 (t_eval).
     sol = _relay_scene().solve(
         0.0,
         0.6,
@@ -192,10 +192,12 @@ def _relay_fixed_final(x0, b):
         stepper=nj.Bathe(),
         controller=nj.ConstantStepSize(),
         h0=0.05,
+        t_eval=jnp.array([0.19, 0.198]),
         max_steps=64,
         throw=False,
     )
-    return sol.y_final[0], (sol.y_final[0], sol.ys[4], sol.result)
+    out = jnp.concatenate([sol.y_final[:1], sol.y_eval[:, 0]])
+    return out, (sol.y_final[0], sol.ys[4], sol.result)
 
 
 def test_relay_step_ending_at_round_off_before_the_switch_carries_its_term():
@@ -209,15 +211,31 @@ def test_relay_step_ending_at_round_off_before_the_switch_carries_its_term():
     x0 = -0.5
     for _ in range(3):
         x0 = float(np.nextafter(x0, -1.0))
-        (dx0, db), (y, y_switch, result) = jax.jacrev(
-            _relay_fixed_final, argnums=(0, 1), has_aux=True
-        )(jnp.asarray(x0), jnp.asarray(b))
+        (dx0, db), (y, y_switch, result) = jax.jacrev(_relay_fixed, argnums=(0, 1), has_aux=True)(
+            jnp.asarray(x0), jnp.asarray(b)
+        )
+        dx0, db = dx0[0], db[0]
         assert result == nj.RESULTS.successful
         assert -1e-15 < y_switch[0] < 0 and y_switch[1] == -1  # short of it, on w = -1
         tau = -x0 / (1 + b)
         np.testing.assert_allclose(y, (b - 1) * (T - tau), rtol=1e-12)
         np.testing.assert_allclose(dx0, (b - 1) / (b + 1), rtol=1e-9)
         np.testing.assert_allclose(db, T - tau - (b - 1) * x0 / (1 + b) ** 2, rtol=1e-9)
+
+
+def test_output_inside_a_step_across_a_switch_has_the_post_switch_derivative():
+    # x' = -w + b from x0 in [-0.47, -0.45] (b = 1.5) switches at tau = -x0/(1 + b) in
+    # [0.180, 0.188], inside a step [0.15, 0.2]: at t = 0.19 and 0.198 after it, x(t) =
+    # (b - 1)(t - tau), so d x(t)/d x0 = (b - 1)/(b + 1) = 0.2 exactly. The interpolant
+    # starts from the step's start moved by the saltation term; without it the derivative
+    # blends the pre-switch 1 into the output (measured 0.222 and 0.206).
+    for x0 in (-0.45, -0.46, -0.47):
+        # The same derivative program as the test above (argnums and types): no compile.
+        (dx0, _), (_, _, result) = jax.jacrev(_relay_fixed, argnums=(0, 1), has_aux=True)(
+            jnp.asarray(x0), jnp.asarray(1.5)
+        )
+        assert result == nj.RESULTS.successful
+        np.testing.assert_allclose(dx0[1:], 0.2, rtol=1e-9)
 
 
 def test_relay_crossing_carries_the_saltation_term():
