@@ -603,13 +603,19 @@ class Model(eqx.Module):
         whole run: the block on a plane with its normal force started at 0 alternated
         between $0$ and $2g$, and the trapezoidal rule took 7 281 steps at rtol 1e-6 and
         stopped the block 2e-4 off. The differential rows are the first stage's."""
-        init = self.solve_stage(
-            solver, t0, h, y0, None, 0.0, y0, y0, args, event_sensitivity=False
-        )[0]
+
+        def stage(y, theta):
+            # One traced stage serves both (theta = 0 at t0, then 1 at t0 + h): the
+            # start-up compiles one nonlinear solve, not two.
+            out = self.solve_stage(
+                solver, t0 + theta * h, h, y, None, theta, y, y, args, event_sensitivity=False
+            )[0]
+            return out.value, out
+
+        thetas = jnp.array([0.0, 1.0], dtype=jnp.result_type(y0))
+        _, both = jax.lax.scan(stage, y0, thetas)
+        init, be = (jax.tree_util.tree_map(lambda a: a[i], both) for i in (0, 1))
         y = init.value
-        be = self.solve_stage(solver, t0 + h, h, y, None, 1.0, y, y, args, event_sensitivity=False)[
-            0
-        ]
         rows = (
             self.algebraic if self.equation_rows is None else self.algebraic & ~self.equation_rows
         )
