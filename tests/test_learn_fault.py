@@ -52,7 +52,8 @@ def _expected(env, state, a, running):
     dt = dt_min + a * (dt_max - dt_min)
     t = float(state.t)
     h = min(dt, task.t1 - t)
-    full, half1, half2 = _solves(env, state.t, jnp.asarray(h), state.y, state.args)
+    args = env.args(state)
+    full, half1, half2 = _solves(env, state.t, jnp.asarray(h), state.y, args)
     ok = [bool(o.stats.nonlinear_result == nj.RESULTS.successful) for o in (full, half1, half2)]
     converged = all(ok)
     y_lo, y_hi = np.asarray(full.y1), np.asarray(half2.y1)
@@ -72,9 +73,9 @@ def _expected(env, state, a, running):
     else:
         reward = -(dt - dt_min) / (dt_max - dt_min)
         y = np.asarray(state.y)
-    K = np.asarray(state.args["K"])
-    mu0 = float(state.args["mu_res"] + state.args["delta_mu"])
-    u_c = -np.linalg.solve(K, mu0 * np.asarray(state.args["sigma"]))
+    K = np.asarray(args["K"])
+    mu0 = float(args["mu_res"] + args["delta_mu"])
+    u_c = -np.linalg.solve(K, mu0 * np.asarray(args["sigma"]))
     u = y[n : 2 * n]
     energy = (u @ K @ u) / (u_c @ K @ u_c)
     rate = y[:n].mean() / (0.07 / units["velocity_mm_per_ms"])
@@ -119,7 +120,7 @@ def test_estimate_matches_step_doubling_controller(env):
     task = env.task
     model, mask = task.model()
     h = info["h"]
-    out = nj.Richardson(task.stepper).step(model, state.t, h, state.y, state.args)
+    out = nj.Richardson(task.stepper).step(model, state.t, h, state.y, env.args(state))
     controller = nj.StepDoublingController(rtol=1e-3, atol=1e-6, order=1)
     step_info = nj.StepInfo(
         t0=state.t,
@@ -153,8 +154,9 @@ def test_vector_env_matches_single(env):
         obs_v, state_v, r_v, d_v, _ = _vstep(env, state_v, acts)
         for i in range(2):
             o, states[i], r, d, _ = _step(env, states[i], acts[i])
-            np.testing.assert_allclose(obs_v[i], o, rtol=1e-9, atol=1e-12)
-            np.testing.assert_allclose(r_v[i], r, rtol=1e-9, atol=1e-12)
+            # Observation 4 and the reward hold E, amplified rounding (see above).
+            np.testing.assert_allclose(obs_v[i], o, rtol=1e-6, atol=1e-12)
+            np.testing.assert_allclose(r_v[i], r, rtol=1e-6, atol=1e-12)
             np.testing.assert_allclose(state_v.y[i], states[i].y, rtol=1e-9, atol=1e-9)
             assert bool(d_v[i]) == bool(d)
 

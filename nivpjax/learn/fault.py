@@ -171,12 +171,14 @@ class FaultEnvParams(eqx.Module):
 
 
 class FaultEnvState(eqx.Module):
-    """One episode of [`nivpjax.learn.FaultEnv`][]: time, state and draw; the running
-    extremes of the per-step cost (for $S_2$); counters; and the last observation."""
+    """One episode of [`nivpjax.learn.FaultEnv`][]: time, state and the drawn parameters
+    (`draw`: the entries of `args` that differ between draws; `FaultEnv.args(state)` is
+    the full `args`); the running extremes of the per-step cost (for $S_2$); counters; and
+    the last observation."""
 
     t: Any
     y: Any
-    args: Any
+    draw: Any
     energy_c: Any  # elastic energy at the instability, the observation's unit
     cost_min: Any
     cost_max: Any
@@ -188,6 +190,7 @@ class FaultEnvState(eqx.Module):
     obs: Any
 
 
+_DRAWN = ("Dc", "delta_mu")  # the entries of `args` that FaultSampler draws
 _NOT_RUN = 2.0  # the study's placeholder residual of a solve it did not run
 
 
@@ -280,6 +283,11 @@ class FaultEnv(eqx.Module):
     def default_params(self) -> FaultEnvParams:
         return FaultEnvParams()
 
+    def args(self, state: FaultEnvState):
+        """The scene's `args` of the episode's draw (the fixed kernel is not in the state:
+        it would be copied by every batched and selected state)."""
+        return dict(self.sampler.args, **state.draw)
+
     def _physics(self, y, args, energy_c):
         n = self.task.scene.n_states // 3
         v, u = y[:n], y[n : 2 * n]
@@ -299,7 +307,7 @@ class FaultEnv(eqx.Module):
         state = FaultEnvState(
             t=jnp.asarray(self.task.t0, dtype),
             y=y0,
-            args=args,
+            draw={k: args[k] for k in _DRAWN},
             energy_c=energy_c,
             cost_min=jnp.asarray(jnp.inf, dtype),
             cost_max=jnp.asarray(-jnp.inf, dtype),
@@ -334,7 +342,8 @@ class FaultEnv(eqx.Module):
         t1 = jnp.asarray(self.task.t1, dtype)
         h = jnp.minimum(dt, t1 - state.t)
         h = jax.lax.stop_gradient(jnp.where(h > 0, h, dt))  # finished members keep h > 0
-        full, half1, half2 = self.doubling(state.t, h, state.y, state.args)
+        args = self.args(state)
+        full, half1, half2 = self.doubling(state.t, h, state.y, args)
         ok = [s.stats.nonlinear_result == RESULTS.successful for s in (full, half1, half2)]
         ran = [jnp.ones((), bool), ok[0], ok[0] & ok[1]]  # the study stops at a failure
         converged = ok[0] & ok[1] & ok[2] & jnp.all(jnp.isfinite(half2.y1))
@@ -358,7 +367,7 @@ class FaultEnv(eqx.Module):
         reward = jnp.where(converged, s1 * s2 * jnp.exp(-params.alpha * E), -(dt - lo) / span)
         t_new = jnp.where(converged, jnp.where(h >= t1 - state.t, t1, state.t + h), state.t)
         y_new = jnp.where(converged, half2.y1, state.y)
-        energy, rate = self._physics(y_new, state.args, state.energy_c)
+        energy, rate = self._physics(y_new, args, state.energy_c)
         sign = jnp.where(converged, 1.0, -1.0)
         flag = converged.astype(dtype)
         obs = jnp.stack(
@@ -370,7 +379,7 @@ class FaultEnv(eqx.Module):
         candidate = FaultEnvState(
             t=t_new,
             y=y_new,
-            args=state.args,
+            draw=state.draw,
             energy_c=state.energy_c,
             cost_min=cost_min,
             cost_max=cost_max,
