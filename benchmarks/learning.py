@@ -1,6 +1,10 @@
 """Learned step-size control against PID at matched error, on held-out parameter draws.
 
     OPENBLAS_NUM_THREADS=1 python -m benchmarks.learning [--scenes ...] [--draws 16]
+    OPENBLAS_NUM_THREADS=1 python -m benchmarks.learning --fault [...]
+
+`--fault` runs the companion study's fault experiment instead (`benchmarks/learning_fault.py`,
+its own options).
 
 Uses the policies shipped in `nivpjax/learn/policies/` (trained by `examples/learn_*.py`).
 For each scene: PID at six tolerances (a sweep around the task's rtol) and the policy at
@@ -14,6 +18,7 @@ benchmarks/results/learning.md.
 import argparse
 import json
 import os
+import sys
 import time
 from pathlib import Path
 
@@ -130,6 +135,11 @@ def report(results, n_draws, seconds):
 
 
 def main(argv=None):
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if "--fault" in argv:
+        from benchmarks import learning_fault
+
+        return learning_fault.main([a for a in argv if a != "--fault"])
     parser = argparse.ArgumentParser(prog="python -m benchmarks.learning")
     parser.add_argument("--scenes", nargs="+", choices=list(TASKS), default=list(TASKS))
     parser.add_argument("--draws", type=int, default=16)

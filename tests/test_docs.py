@@ -50,9 +50,12 @@ SKIPPED = {
     # `nj.fit` of three friction parameters from four starts through 12 s of stick-slip:
     # about a minute on two cores (run by hand, as is examples/calibrate_slider.py).
     "tutorials/calibration.md": 1,
-    # `learn.train` (compiles one large vmapped program: minutes) and a gymnasium episode
-    # (compiles the environment's reset, step and reference solve).
-    "tutorials/learned-step-size.md": 2,
+    # `learn.train` (compiles one large vmapped program: minutes), a gymnasium episode
+    # (compiles the environment's reset, step and reference solve) and the fault study's
+    # environment (compiles its three solves; tests/test_learn_fault.py runs it).
+    "tutorials/learned-step-size.md": 3,
+    # rejax SAC on the gymnax environment: needs the optional `rl` extra.
+    "api/rl.md": 1,
     # `jax.distributed.initialize` for a sweep across machines (two processes; the
     # localhost run is tests/test_batched.py::test_two_processes_equal_one).
     "tutorials/batched-sweeps.md": 1,

@@ -21,6 +21,7 @@ MODULES = (
     "nivpjax.scenes",
     "nivpjax.learn",
     "nivpjax.learn.tasks",
+    "nivpjax.learn.fault",
     "nivpjax.learn.pretrained",
     "nivpjax.rl",
 )

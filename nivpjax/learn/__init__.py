@@ -23,3 +23,9 @@ from ._train import (
     plot_learning_curve as plot_learning_curve,
     train as train,
 )
+from .fault import (
+    FaultEnv as FaultEnv,
+    FaultEnvParams as FaultEnvParams,
+    FaultEnvState as FaultEnvState,
+    fault_task as fault_task,
+)
