@@ -716,6 +716,19 @@ class Model(eqx.Module):
         )
         return jax.lax.stop_gradient(self.projector.next_event(ctx))
 
+    @property
+    def has_arrests(self) -> bool:
+        return self.projector.has_arrests
+
+    def arrest_error(self, t1, h, y0, y1, args):
+        """`(arrested, error)`, full state: the rows that came to rest inside the step from
+        `y0` to `y1` and the local error of their end values (see
+        `AbstractProjector.arrest_error`), for a stepper's error estimate."""
+        rate0 = self._rate(t1 - h, y0, args)
+        rate1 = self._rate(t1, y1, args)
+        ctx = self._context(t1, h, y0, y1, args, start_rate=rate0, end_rate=rate1)
+        return self.projector.arrest_error(ctx)
+
     def initial_violation(self, t0, h, y0, args):
         """Violation of the initial state no stage can restore (see
         `AbstractProjector.initial_violation`)."""
