@@ -163,7 +163,7 @@ class Bathe(AbstractStepper):
         if model.has_arrests:
             # Rows that came to rest inside the step (friction sticking): their estimate
             # above measures the jump of their rate, not an error of their value.
-            arrested, stop_error = model.arrest_error(t1, h, y0, y1, args)
+            arrested, stop_error = model.arrest_error(t1, h, y0, y1, f0, f1, args)
             e = jnp.where(arrested, stop_error, e)
         left = departure_error(model, t0, h, y0, y1, f0, f1, args)
         e = jnp.where(jnp.abs(left) > jnp.abs(e), left, e)
