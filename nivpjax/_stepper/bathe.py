@@ -99,11 +99,13 @@ class Bathe(AbstractStepper):
     backward Euler step from $y_\gamma$ over $(1-\gamma)h$, and the estimate is that of
     the two sub-steps: $\tfrac{(1-\gamma)h}{2}(f_1 - f_\gamma)$ plus
     $\tfrac{\gamma h}{2}(f_\gamma - f_0)$, which charges the rate jump inside the first
-    stage. On a row that came to rest inside the step (a sliding velocity stuck by
-    friction at the end, [`nivpjax.AbstractProjector.arrest_error`][]) the estimate is the
-    projector's instead: zero where the slip it left had reached rest by the end (its
-    value is then exact; the arrest's timing is an error of the displacement rows, whose
-    estimates stay), the slip velocity still left at the end where it had not.
+    stage (on friction rows with the effective rates $f + r$: a velocity held throughout
+    has a zero estimate whichever other row switched). On a row that came to rest inside
+    the step (a sliding velocity stuck by friction at the end,
+    [`nivpjax.AbstractProjector.arrest_error`][]) the estimate is the projector's
+    instead: zero where the slip it left had reached rest by the end (its value is then
+    exact; the arrest's timing is an error of the displacement rows, whose estimates
+    stay), the slip velocity still left at the end where it had not.
     """
 
     gamma: float = 0.5
