@@ -452,6 +452,17 @@ def main(argv=None):
         default=[16, 32, 100, 316],
         help="cells per side of the spectral trajectories, comma-separated",
     )
+    parser.add_argument(
+        "--compare-only",
+        action="store_true",
+        help="only the comparison with the reference; writes large-compare.{md,json}",
+    )
+    parser.add_argument(
+        "--compare-rtols",
+        type=lambda text: [float(x) for x in text.split(",")],
+        default=[1e-3, 1e-4, 1e-5],
+        help="nivpjax's tolerances in the comparison, comma-separated",
+    )
     parser.add_argument("--one", help=argparse.SUPPRESS)
     parser.add_argument("--reference-one", type=int, help=argparse.SUPPRESS)
     opts = parser.parse_args(argv)
@@ -474,6 +485,29 @@ def main(argv=None):
     dense_sizes = [4, 10, 20] if opts.quick else [4, 10, 20, 32, 50]
     spectral_sizes = [4, 8, 16, 32] if opts.quick else [8, 16, 32, 100, 316, 1000]
     log(f"solvers: {solvers}")
+    if opts.compare_only:
+        compare = compare_reference(solvers, [], opts, log)
+        report = dict(
+            solvers=solvers,
+            truth_solver=opts.truth_solver,
+            machine=f"{platform.machine()}, {os.cpu_count()} cores, float64",
+            load=os.getloadavg(),
+            date=time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
+            compare=compare,
+        )
+        RESULTS.mkdir(exist_ok=True)
+        (RESULTS / "large-compare.json").write_text(json.dumps(report, indent=1))
+        head = [
+            "# The fault against the reference",
+            "",
+            f"`python -m benchmarks.large --compare-only` on {report['date']}; "
+            f"{report['machine']}, load average {report['load'][0]:.1f} (a shared machine: "
+            "wall times are inflated; CPU time is the steadier measure).",
+        ]
+        (RESULTS / "large-compare.md").write_text("\n".join(head + compare_markdown(report)) + "\n")
+        elapsed = time.perf_counter() - t_start
+        log(f"written to benchmarks/results/large-compare.md ({elapsed:.0f} s)")
+        return
     log("cost per step:")
     steps = []
     for solver in solvers:
@@ -502,30 +536,7 @@ def main(argv=None):
     gr_spec = dict(mode="grad", kernel="dense", nx=grad_nx, solver=opts.batch_solver)
     gr = spawn(dict(gr_spec, rtol=1e-6, atol=1e-6), opts.budget * 4)
     log(f"  grad {grad_nx}x{grad_nx}: {json.dumps(gr)[:400]}")
-    log("against the reference (dense study kernels):")
-    compare = []
-    for nx in [10] if opts.quick else [10, 20]:
-        truth = spawn(
-            dict(
-                mode="trajectory",
-                kernel="dense",
-                nx=nx,
-                solver=opts.truth_solver,
-                rtol=opts.tight,
-                atol=1e-3 * opts.tight,
-            ),
-            opts.budget * 4,
-        )
-        log(f"  truth {nx}x{nx} ({opts.truth_solver}, rtol {opts.tight:g}): {_brief(truth)}")
-        runs = []
-        for solver in solvers:
-            for rtol in [1e-3, 1e-4, 1e-5]:
-                row = trajectory("dense", nx, solver, rtol, steps, opts, log)
-                log(f"  {solver} {nx}x{nx} rtol {rtol:g}: {_brief(row)}")
-                runs.append(row)
-        ref = None if opts.no_reference else _spawn_reference(nx, opts.budget * 4)
-        log(f"  reference {nx}x{nx}: {_brief(ref)}")
-        compare.append(dict(nx=nx, truth=truth, runs=runs, reference=ref))
+    compare = compare_reference(solvers, steps, opts, log)
     report = dict(
         solvers=solvers,
         truth_solver=opts.truth_solver,
@@ -547,6 +558,36 @@ def main(argv=None):
     (RESULTS / f"{name}.md").write_text(markdown(report))
     plot(report, RESULTS / f"{name}.png")
     log(f"written to benchmarks/results/{name}.md ({time.perf_counter() - t_start:.0f} s)")
+
+
+def compare_reference(solvers, steps, opts, log):
+    """The reference against nivpjax at the study's dense kernels (10x10, and 20x20 unless
+    `--quick`): a tight-tolerance truth, nivpjax at `--compare-rtols`, the reference."""
+    log("against the reference (dense study kernels):")
+    compare = []
+    for nx in [10] if opts.quick else [10, 20]:
+        truth = spawn(
+            dict(
+                mode="trajectory",
+                kernel="dense",
+                nx=nx,
+                solver=opts.truth_solver,
+                rtol=opts.tight,
+                atol=1e-3 * opts.tight,
+            ),
+            opts.budget * 4,
+        )
+        log(f"  truth {nx}x{nx} ({opts.truth_solver}, rtol {opts.tight:g}): {_brief(truth)}")
+        runs = []
+        for solver in solvers:
+            for rtol in opts.compare_rtols:
+                row = trajectory("dense", nx, solver, rtol, steps, opts, log)
+                log(f"  {solver} {nx}x{nx} rtol {rtol:g}: {_brief(row)}")
+                runs.append(row)
+        ref = None if opts.no_reference else _spawn_reference(nx, opts.budget * 4)
+        log(f"  reference {nx}x{nx}: {_brief(ref)}")
+        compare.append(dict(nx=nx, truth=truth, runs=runs, reference=ref))
+    return compare
 
 
 def _spawn_reference(nx, timeout):
@@ -668,7 +709,12 @@ def markdown(r):
             f"difference {small['rel_diff']:.2e} ({small['grad_s_with_compile']:.0f} s "
             "with compile)."
         )
-    out += [
+    return "\n".join(out + compare_markdown(r)) + "\n"
+
+
+def compare_markdown(r):
+    """The lines of the comparison with the reference (`r["compare"]`)."""
+    out = [
         "",
         "## Against the reference (the study's settings; t in [0, 34.641] at 10x10, "
         "[0, 20.785] at 20x20: 30 s)",
@@ -732,7 +778,7 @@ def markdown(r):
                         f"**{ref['cpu_s'] / best['cpu_s']:.1f}x**."
                     )
             out.append("")
-    return "\n".join(out) + "\n"
+    return out
 
 
 def plot(r, path):

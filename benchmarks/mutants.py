@@ -723,8 +723,8 @@ MUTANTS = [
         "bathe_reaction_at_end_only",
         "steppers",
         S + "bathe.py",
-        "smooth = bathe_error(g, h, f0 + r0, f_mid + r_mid, f1 + r_b)",
-        "smooth = bathe_error(g, h, f0, f_mid, f1 + r_b)",
+        "smooth = bathe_error(g, h, F0, F_mid, F1)",
+        "smooth = bathe_error(g, h, f0, f_mid, F1)",
         "Bathe's docstring: the stages' reactions, taken linear in time, drop out of the "
         "estimate (a body held under a load linear in time has exactly zero estimate; the "
         "holding force at t1 alone: 3.8e-2 for an exact step); replaces "
@@ -750,6 +750,37 @@ MUTANTS = [
             "tests/test_filippov.py::test_invariant_or_failure_code[bathe-newton]",
             "tests/test_scenes_mechanics.py::test_slider_stick_slip",
         ),
+    ),
+    Mutant(
+        "bathe_arrest_estimate_dropped",
+        "steppers",
+        S + "bathe.py",
+        "e = jnp.where(arrested, stop_error, e)",
+        "e = jnp.where(arrested, e, e)",
+        "Bathe's docstring: on a row that came to rest inside the step the estimate is the "
+        "projector's (the jump of its rate is no error of its value: the fault's steps "
+        "collapsed at every arrest)",
+        (TE + "test_bathe_estimate_of_a_block_coming_to_rest_inside_the_step",),
+    ),
+    Mutant(
+        "bathe_split_on_f_alone",
+        "steppers",
+        S + "bathe.py",
+        "f0, f_mid, f1 = (jnp.where(model.weighed, a, b) for a, b in zip(F, f))",
+        "f0, f_mid, f1 = (jnp.where(model.weighed, b, b) for a, b in zip(F, f))",
+        "_split_error's comment: on f alone a row held throughout is charged the change of "
+        "its load",
+        (TE + "test_bathe_estimate_of_a_block_coming_to_rest_inside_the_step",),
+    ),
+    Mutant(
+        "friction_arrest_early_uncharged",
+        "projectors",
+        P + "coulomb.py",
+        "return arrested, jnp.where(early, slip, 0.0)",
+        "return arrested, jnp.where(early, 0.0, 0.0)",
+        "CoulombFriction.arrest_error's docstring: a row that stopped early is off by the "
+        "slip velocity left at the end",
+        (TE + "test_arrest_error_is_the_slip_velocity_left_at_the_end",),
     ),
     Mutant(
         "bathe_no_restart_on_switch",

@@ -722,6 +722,20 @@ class Model(eqx.Module):
         )
         return jax.lax.stop_gradient(self.projector.next_event(ctx))
 
+    @property
+    def has_arrests(self) -> bool:
+        return self.projector.has_arrests
+
+    def arrest_error(self, t1, h, y0, y1, f0, f1, args):
+        """`(arrested, error)`, full state: the rows that came to rest inside the step from
+        `y0` to `y1` and the local error of their end values (see
+        `AbstractProjector.arrest_error`), for a stepper's error estimate; `f0`, `f1`: the
+        vector field at the two ends (a stepper has them: a large model's field is its
+        cost)."""
+        rate0, rate1 = self.to_state(f0), self.to_state(f1)
+        ctx = self._context(t1, h, y0, y1, args, start_rate=rate0, end_rate=rate1)
+        return self.projector.arrest_error(ctx)
+
     def initial_violation(self, t0, h, y0, args):
         """Violation of the initial state no stage can restore (see
         `AbstractProjector.initial_violation`)."""

@@ -339,3 +339,74 @@ def test_an_event_predicted_at_the_end_of_a_step_up_to_rounding_lies_inside_it()
     for tau, inside in ((h * (1 + 4 * eps), h), (h * 1.01, 0.0), (0.5 * h, 0.5 * h)):
         got = event_in_step(Predicts(jnp.asarray(tau)), 0.0, h, y, y, None)
         assert float(got) == float(inside), (tau, got)
+
+
+def _two_blocks():
+    # x' = v, v' = F - c Sign(v) for two uncoupled blocks: A under F = 1 + t/2 with c = 3
+    # (slides to rest), B under F = 2 + 3 t with c = 10 (held throughout).
+    scene = nj.Scene(
+        lambda t, x, a, m: jnp.stack([x[2], x[3], 1.0 + 0.5 * t, 2.0 + 3.0 * t]),
+        4,
+        (nj.Friction([2, 3], jnp.array([3.0, 10.0])),),
+    )
+    return Model.build(scene.vector_field, scene.projector, None, np.zeros(4, bool))
+
+
+def test_bathe_estimate_of_a_block_coming_to_rest_inside_the_step():
+    # Block A starts at v0 = 2 tau - tau^2/4 and comes to rest at tau (closed form:
+    # v = v0 - 2t + t^2/4, x(tau) = v0 tau - tau^2 + tau^3/12), inside the first stage or
+    # the second. Its velocity at the end, zero, is exact, and so must be its estimate
+    # (before: 5e-3 to 8.7e-2, the jump of its rate, at any step size: the fault's steps
+    # collapsed at each cell's arrest). The arrest's timing is an error of x, which the
+    # estimate keeps (ratio to the true error 0.62 to 9.7 over these positions of tau).
+    # Block B is held throughout: its estimate is zero whichever block switched (before:
+    # 3e-2 when A stopped in the first stage, the restart's estimate charging the change
+    # of B's load, which its reaction cancels).
+    h = 0.2
+    step = jax.jit(
+        lambda y0: nj.Bathe(solver=TIGHT).step(_two_blocks(), jnp.asarray(0.0), h, y0, None)
+    )
+    for fraction in (0.1, 0.3, 0.45, 0.55, 0.7, 0.9):
+        tau = fraction * h
+        v0 = 2 * tau - 0.25 * tau**2
+        out = step(jnp.array([0.0, 0.0, v0, 0.0]))
+        y1, est = np.asarray(out.y1), np.asarray(out.y_error)
+        assert np.all(np.abs(y1[2:]) < 1e-15), (fraction, y1)
+        assert est[2] == 0.0 and np.all(np.abs(est[1::2]) < 1e-15), (fraction, est)
+        true = y1[0] - (v0 * tau - tau**2 + tau**3 / 12)
+        assert 0.6 * abs(true) <= abs(est[0]) <= 10 * abs(true), (fraction, est[0], true)
+
+
+def test_arrest_error_is_the_slip_velocity_left_at_the_end():
+    # A block under a load growing from 1 to 1 + h/2 against c = 3 from v0 = 1: along
+    # its slip the acceleration is linear, -2 + t/2, so v0 + h (a0 + a1)/2 is its exact
+    # velocity at h; it reaches zero at tau = 4 - 2 sqrt 3 = 0.536. A step stuck at the end
+    # is exact beyond tau (error 0) and off by that velocity before it.
+    projector = nj.BlockProjector([([1], nj.CoulombFriction(3.0))])
+
+    def arrest(h, v1, v0=1.0):
+        ctx = nj.ProjectionContext(
+            t=jnp.asarray(h),
+            h=jnp.asarray(h),
+            y_prev=jnp.array([0.0, v0]),
+            y_iter=jnp.array([0.1, v1]),
+            rho=jnp.full(2, h),
+            args=None,
+            start_rate=jnp.array([v0, 1.0]),
+            end_rate=jnp.array([v1, 1.0 + 0.5 * h]),
+        )
+        arrested, error = projector.arrest_error(ctx)
+        return np.asarray(arrested), np.asarray(error)
+
+    for h in (0.1, 0.3, 0.5):
+        arrested, error = arrest(h, 0.0)
+        np.testing.assert_array_equal(arrested, [False, True])
+        np.testing.assert_allclose(error, [0.0, 1.0 - 2 * h + 0.25 * h**2], rtol=1e-14)
+    for h in (0.6, 1.0):
+        arrested, error = arrest(h, 0.0)
+        np.testing.assert_array_equal(arrested, [False, True])
+        np.testing.assert_array_equal(error, [0.0, 0.0])
+    # Not an arrest: still sliding at the end, or stuck at both ends.
+    for v0, v1 in ((1.0, 0.4), (0.0, 0.0)):
+        arrested, error = arrest(0.3, v1, v0)
+        assert not arrested.any() and not error.any(), (v0, v1)

@@ -192,6 +192,30 @@ class AbstractProjector(eqx.Module):
         return zero, zero, jnp.zeros((), bool)
 
     @property
+    def has_arrests(self) -> bool:
+        """Whether `arrest_error` can report a row (static: a model without one skips that
+        work in each step)."""
+        return False
+
+    def arrest_error(self, ctx: ProjectionContext) -> tuple[Bool[Array, " m"], Float[Array, " m"]]:
+        r"""`(arrested, error)` over the projector's components for a step from
+        `ctx.y_prev` to `ctx.y_iter` (`ctx.start_rate`, `ctx.end_rate`: the rates at its
+        ends, state units): the rows that came to rest inside the step (a sliding velocity
+        stuck by friction at the end), and the local error of their value at the end.
+
+        A row at rest at the end has the exact value there when the flow it left reached
+        rest inside the step and the law holds it (the end's reaction inside its bound,
+        which `violation` checks): the timing of the arrest is an error of the rows that
+        integrate it (a position), whose estimates stay. A smooth-rate estimate on the row
+        itself (a divided difference of rates that jump at the arrest, or the change of an
+        applied force that the reaction cancels) measures the jump instead, at any step
+        size, and collapses the step at each arrest. `error`: the value the row would still
+        have at the end along the flow it left, where that flow had not reached rest by
+        then (the row stopped early); zero where it had. Default: none."""
+        m = ctx.rho.shape
+        return jnp.zeros(m, bool), jnp.zeros(m, ctx.y_iter.dtype)
+
+    @property
     def has_start_selection(self) -> bool:
         """Whether `start_selection` can change a selection (static: a model without one
         skips that work at the start of each step)."""

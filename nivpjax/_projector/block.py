@@ -163,6 +163,22 @@ class BlockProjector(AbstractProjector):
                 found = found | found_b
         return base, end, found
 
+    @property
+    def has_arrests(self) -> bool:
+        return any(projector.has_arrests for _, projector in self.blocks)
+
+    def arrest_error(self, ctx: ProjectionContext):
+        """Each block's arrested rows and their errors on its own components."""
+        arrested = jnp.zeros(ctx.rho.shape, bool)
+        error = jnp.zeros(ctx.rho.shape, ctx.y_iter.dtype)
+        for indices, projector in self.blocks:
+            if projector.has_arrests:
+                idx = np.asarray(indices)
+                a, e = projector.arrest_error(self._sub(ctx, indices, ctx.rho.shape))
+                arrested = arrested.at[idx].set(a)
+                error = error.at[idx].set(e)
+        return arrested, error
+
     def acts_on(self, n: int) -> np.ndarray:
         """The rows of the blocks whose projectors may move them."""
         return self._rows(n, lambda projector, m: projector.acts_on(m))

@@ -111,6 +111,37 @@ class CoulombFriction(AbstractProjector):
         return jnp.any(mode(v0) != mode(v1))
 
     @property
+    def has_arrests(self) -> bool:
+        return not self.isotropic
+
+    def arrest_error(self, ctx: ProjectionContext):
+        r"""The velocities that slid at the step's start and stick at its end (as
+        `switched` tells them apart) came to rest inside the step. Their value, zero, is
+        exact if the slip they left had reached zero by the end: with the slip branch's
+        acceleration $a = \dot v - c\,\operatorname{sign} v_0$ at both ends ($\dot v$
+        from `ctx.start_rate`, `ctx.end_rate`; $c$ the bound there; unit mass on the
+        friction rows, as `violation` assumes), the slip velocity at the end is
+        $v_0 + \tfrac h2 (a_0 + a_1)$. Where it still has the sign of $v_0$, the row
+        stopped early and that velocity is its error; otherwise the error is zero (the
+        arrest's timing is the error of the displacement rows, whose estimates stay).
+        Interval friction only (a disk's velocity comes to rest on no scalar switch)."""
+        dtype = ctx.y_iter.dtype
+        v0, v1 = ctx.restrict(ctx.y_prev), ctx.restrict(ctx.y_iter)
+        if self.isotropic or ctx.start_rate is None or ctx.end_rate is None:
+            return jnp.zeros(v0.shape, bool), jnp.zeros_like(v0)
+        tol = 64 * jnp.finfo(dtype).eps * (1.0 + jnp.max(jnp.abs(v0), initial=0.0))
+        arrested = (jnp.abs(v0) > tol) & (jnp.abs(v1) <= tol)
+        start = eqx.tree_at(lambda c: c.y_iter, ctx, ctx.y_prev)
+        c0 = jnp.broadcast_to(jnp.maximum(resolve(self.bound, start, dtype), 0.0), v0.shape)
+        c1 = jnp.broadcast_to(jnp.maximum(resolve(self.bound, ctx, dtype), 0.0), v0.shape)
+        direction = jnp.sign(v0)
+        a0 = ctx.restrict(ctx.start_rate) - c0 * direction
+        a1 = ctx.restrict(ctx.end_rate) - c1 * direction
+        slip = v0 + 0.5 * ctx.h * (a0 + a1)
+        early = arrested & (slip * direction > 0)
+        return arrested, jnp.where(early, slip, 0.0)
+
+    @property
     def has_switch_shift(self) -> bool:
         return not self.isotropic
 
