@@ -171,7 +171,10 @@ def solve(
     )
     if not call.known:  # traces the user's function: only for a new structure or new types
         v.check_vector_field(vector_field, t0, y0, args)
-    sol = call()
+    # Reverse mode through the checkpointed adjoint runs compiled programs of its own
+    # (`CachedJit.call_with_vjp`): cached, and with nivpjax's compiler options under a
+    # top-level `jax.grad`.
+    sol = call.with_vjp() if adjoint == "checkpointed" else call()
     if throw and not traced:
         sol = _raise_if_failed(sol)
     return sol
