@@ -29,6 +29,7 @@ from typing import Any
 
 import equinox as eqx
 import jax
+import jax.numpy as jnp
 import numpy as np
 
 from ._compiler import call_top_level, compiler_options
@@ -238,7 +239,9 @@ def _is_symbolic_zero(x) -> bool:
 def _instantiate(x):
     # A symbolic zero cotangent as an array (float0 for integer outputs).
     if _is_symbolic_zero(x):
-        return np.zeros(x.aval.shape, x.aval.dtype)
+        if x.aval.dtype == jax.dtypes.float0:
+            return np.zeros(x.aval.shape, x.aval.dtype)
+        return jnp.zeros(x.aval.shape, x.aval.dtype)
     return x
 
 

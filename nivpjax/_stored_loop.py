@@ -22,6 +22,7 @@ would leave closed over), becomes an argument of the custom VJP.
 import jax
 import jax.extend
 import jax.numpy as jnp
+import numpy as np
 from jax import lax
 
 
@@ -50,7 +51,6 @@ def stored_while_loop(cond, step, state, buffers: dict, max_steps: int):
     step_fn, step_consts = _convert(step, state)
     cond_fn, cond_consts = _convert(cond, state)
     cond_consts = [lax.stop_gradient(c) for c in cond_consts]
-    treedef = jax.tree.structure(state)
     floats = {name: _is_float(buf) for name, buf in buffers.items()}
 
     def forward(state, buffers, consts, cond_consts, step=None, stored=()):
@@ -80,42 +80,51 @@ def stored_while_loop(cond, step, state, buffers: dict, max_steps: int):
         return forward(state, buffers, consts, cond_consts)[0]
 
     def loop_fwd(state, buffers, consts, cond_consts):
-        lin = _Linearised(step_fn, state, consts, floats, treedef)
+        # Symbolic zeros: differentiate in the perturbed constants only (the state's
+        # float leaves all: a leaf unperturbed on entry may be perturbed by the steps).
+        state, buffers, cond_consts = jax.tree.map(lambda p: p.value, (state, buffers, cond_consts))
+        diff_consts = [_is_float(c.value) and bool(c.perturbed) for c in consts]
+        consts = [c.value for c in consts]
+        lin = _Linearised(step_fn, consts, diff_consts, floats, state, residuals=True)
+        box["lin"] = lin
         if lin.stored_bytes * max_steps <= STORE_BUDGET_BYTES:
-            out, (k, stored) = forward(
-                state, buffers, consts, cond_consts, lin.step, lin.empty(max_steps)
-            )
-            box["lin"] = lin
+            stored = lin.empty(max_steps)
+            out, (k, stored) = forward(state, buffers, consts, cond_consts, lin.step, stored)
             return out, (k, stored, consts)
-
         # Residuals too large: store the states, and linearise each step again.
+        box["lin"] = _Linearised(step_fn, consts, diff_consts, floats, state, residuals=False)
+
         def store_state(consts, state):
             return (*step_fn(consts, state), jax.tree.leaves(state))
 
         empty = [jnp.zeros((max_steps,) + x.shape, x.dtype) for x in jax.tree.leaves(state)]
         out, (k, stored) = forward(state, buffers, consts, cond_consts, store_state, empty)
-        box["lin"] = None
         return out, (k, stored, consts)
 
     def loop_bwd(res, ct):
         k, stored, consts = res
         lin = box["lin"]
-        if lin is not None:
-            lin.consts = consts  # this trace's values, not the forward pass's
-        if lin is None:
-            lin = _Linearised(step_fn, None, consts, floats, treedef)
-            lin.is_diff = [_is_float(x) for x in stored]
-            vjp_at = lin.vjp_at_state
-        else:
-            vjp_at = lin.vjp_from_residuals
+        lin.consts = consts  # this trace's values, not the forward pass's
+        ct = jax.tree.map(_instantiate, ct, is_leaf=_is_symbolic_zero)
         ct_state, ct_buffers = ct
-        ct_state0, ct_buffers0, ct_consts = _reverse(
-            lin, vjp_at, k, stored, consts, ct_state, ct_buffers
-        )
+        ct_state0, ct_buffers0, ct_consts = _reverse(lin, k, stored, ct_state, ct_buffers)
         return ct_state0, ct_buffers0, ct_consts, [None] * len(cond_consts)
 
-    loop.defvjp(loop_fwd, loop_bwd)
+    loop.defvjp(loop_fwd, loop_bwd, symbolic_zeros=True)
     return loop(state, buffers, step_consts, cond_consts)
+
+
+def _is_symbolic_zero(x) -> bool:
+    return isinstance(x, jax.custom_derivatives.SymbolicZero)
+
+
+def _instantiate(x):
+    # A symbolic zero cotangent as an array (float0 for integer leaves).
+    if _is_symbolic_zero(x):
+        if x.aval.dtype == jax.dtypes.float0:
+            return np.zeros(x.aval.shape, x.aval.dtype)
+        return jnp.zeros(x.aval.shape, x.aval.dtype)
+    return x
 
 
 class _Linearised:
@@ -124,16 +133,17 @@ class _Linearised:
     forward pass (`step`, `vjp_from_residuals`), or by linearising at a stored state
     (`vjp_at_state`)."""
 
-    def __init__(self, step_fn, state, consts, floats, treedef=None):
+    def __init__(self, step_fn, consts, diff_consts, floats, state, residuals: bool):
         self.step_fn = step_fn
         self.consts = consts
-        self.diff_consts = [_is_float(c) for c in consts]
+        self.diff_consts = diff_consts
         self.float_bufs = [name for name, is_float in floats.items() if is_float]
-        self.treedef = treedef
-        if state is None:
-            return
-        leaves = jax.tree.leaves(state)
+        leaves, self.treedef = jax.tree.flatten(state)
         self.is_diff = [_is_float(x) for x in leaves]
+        if not residuals:  # linearised at the stored states
+            self.vjp_at = self.vjp_at_state
+            return
+        self.vjp_at = self.vjp_from_residuals
         # The forward step with its VJP's residuals, traced once: residuals that are
         # constants of the loop (the step's constants, literals) are not stored.
         n_consts = len(consts)
@@ -222,10 +232,11 @@ class _Linearised:
         return vjp_fn, (index, pred)
 
 
-def _reverse(lin, vjp_at, count, stored, consts, ct_state, ct_buffers):
+def _reverse(lin, count, stored, ct_state, ct_buffers):
     # Walk back from the last iteration: at each, the VJP of the step with the cotangent
     # of its output state and of the rows it wrote (read, then cleared, at its row where
     # it wrote one). The constants' cotangents sum over the iterations.
+    consts = lin.consts
     leaves_ct = jax.tree.leaves(ct_state)
     is_diff = lin.is_diff
     diff_consts = lin.diff_consts
@@ -236,7 +247,7 @@ def _reverse(lin, vjp_at, count, stored, consts, ct_state, ct_buffers):
     def body(carry):
         k, ct_state, ct_bufs, ct_consts = carry
         k = k - 1
-        vjp_fn, (index, pred) = vjp_at(stored, k)
+        vjp_fn, (index, pred) = lin.vjp_at(stored, k)
         ct_rows = {}
         for name in lin.float_bufs:
             row = ct_bufs[name][index]
