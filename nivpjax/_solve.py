@@ -108,7 +108,10 @@ def solve(
       online Stumm–Walther checkpointing with $O(\sqrt{\text{max\_steps}})$ checkpoints
       (90 for `max_steps=4096`), which recomputes steps from the stored ones. A value of
       at least `max_steps` (larger values are clipped to it) stores every step whatever
-      the memory; a smaller value selects equinox's checkpointing with that many. Values
+      the memory; a smaller value selects equinox's checkpointing with that many (what a
+      `jax.vmap` of many gradients wants: the default's storage, allocated up front,
+      is per member, e.g. 5.8 MB for the default ball and 14.6 MB for the relay at
+      `max_steps=4096`). Values
       and gradients do not depend on it (up to round-off); only the cost of reverse mode
       does. Under `jax.grad`, the solve's reverse mode runs two cached programs of its
       own (the forward pass with the stored values, and the backward pass), compiled
