@@ -1,18 +1,22 @@
 r"""Reverse mode through the time loop with every attempted step stored.
 
-A `lax.while_loop` whose reverse mode is a `jax.custom_vjp`: the forward pass stores the
-loop state before each iteration (`max_steps` rows, the per-step output buffers excepted),
-and the backward pass walks back through the stored states, one VJP of the step at each,
-with the output buffers' cotangents read at the rows each step wrote. Nothing is
-recomputed beyond the step being transposed, and the program holds one forward loop and
-one reverse loop.
+A `lax.while_loop` whose reverse mode is a `jax.custom_vjp`. Differentiated, the forward
+pass runs the step linearised once (`jax.vjp` of it, traced once and evaluated in the
+loop) and stores, per iteration, the residuals of its VJP (`max_steps` rows; residuals that
+are the loop's constants are not stored); the backward pass walks back through them,
+applying each VJP (transposition only: no step is recomputed), with the output buffers'
+cotangents read at the rows each step wrote. When the residuals exceed `STORE_BUDGET_BYTES`
+the forward pass stores the loop state instead (the per-step output buffers excepted) and
+the backward pass linearises the step again at each. Not differentiated, it is the plain
+loop.
 
-It gives the same derivatives as `equinox.internal.while_loop(kind="checkpointed")` with
-`checkpoints=max_steps` (the same VJP of the same step at the same states, summed in the
-same order), without that loop's analyses of which state is perturbed (each a linearisation
-of the step, run to a fixed point under `jax.eval_shape`), which took most of the tracing
-time of a first gradient: every float leaf is treated as perturbed, and JAX's own symbolic
-zeros inside the step's VJP drop what does not depend on the inputs.
+It gives the same derivatives as `equinox.internal.while_loop(kind="checkpointed")` (the
+same VJP of the same step at the same states, summed in the same order; 1 ulp in tests),
+without that loop's analyses of which state is perturbed (each a linearisation of the
+step, run to a fixed point under `jax.eval_shape`, two of them nested in the outer trace),
+which took about two thirds of the tracing time of a first gradient. Here every float leaf
+of the state is treated as perturbed (JAX's symbolic zeros inside the step's VJP drop what
+does not depend on the inputs) and the constants as the custom VJP's symbolic zeros say.
 
 The step is converted to a closed jaxpr first (`_convert`): every value it closes over,
 tracers of enclosing transformations included (integer ones too, which `jax.closure_convert`
