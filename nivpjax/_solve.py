@@ -105,17 +105,18 @@ def solve(
       forward pass then stores, per attempt, the residuals of the step's VJP (or, when
       those exceed 64 MiB in all, the loop state, linearised again on the way back;
       `nivpjax._stored_loop`), and reverse mode recomputes no step. When they do not
-      fit, equinox's online Stumm–Walther checkpointing with $O(\sqrt{\text{max\_steps}})$ checkpoints
-      (90 for `max_steps=4096`), which recomputes steps from the stored ones. A value of
-      at least `max_steps` (larger values are clipped to it) stores every step whatever
-      the memory; a smaller value selects equinox's checkpointing with that many, which
-      suits a `jax.vmap` of many gradients (the default's storage, allocated up front,
-      is per member, e.g. 5.8 MB for the default ball and 14.6 MB for the relay at
-      `max_steps=4096`). Values and gradients do not depend on it (up to round-off);
-      only the cost of reverse mode does. Under `jax.grad`, the solve's reverse mode runs two cached programs of its
-      own (the forward pass with the stored values, and the backward pass), compiled
-      with `nj.compiler_options()` when the gradient is taken at top level: a second
-      gradient of the same structure compiles nothing.
+      fit, equinox's online Stumm–Walther checkpointing with
+      $O(\sqrt{\text{max\_steps}})$ checkpoints (90 for `max_steps=4096`), which
+      recomputes steps from the stored ones. A value of at least `max_steps` (larger
+      values are clipped to it) stores every step whatever the memory; a smaller value
+      selects equinox's checkpointing with that many, which suits a `jax.vmap` of many
+      gradients (the default's storage, allocated up front, is per member, e.g. 5.8 MB
+      for the default ball and 14.6 MB for the relay at `max_steps=4096`). Values and
+      gradients do not depend on it (up to round-off); only the cost of reverse mode
+      does. Under `jax.grad`, the solve's reverse mode
+      runs two cached programs of its own (the forward pass with the stored values,
+      and the backward pass), compiled with `nj.compiler_options()` when the gradient
+      is taken at top level: a second gradient of the same structure compiles nothing.
     - `progress`: print a progress bar to stderr.
     - `throw`: raise [`nivpjax.SolveError`][] if the run failed (`max_steps` reached, step
       size below `h_min`, repeated nonlinear failures). With `False` the failure is only in
