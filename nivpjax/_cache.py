@@ -29,6 +29,7 @@ from typing import Any
 
 import equinox as eqx
 import jax
+import jax.numpy as jnp
 import numpy as np
 
 from ._compiler import call_top_level, compiler_options
@@ -221,6 +222,28 @@ class PreparedCall:
     def __call__(self):
         return self.owner._call(self)
 
+    def with_vjp(self):
+        """The call, reverse-mode differentiated through compiled programs of its own (see
+        `CachedJit.call_with_vjp`); the same values."""
+        return self.owner.call_with_vjp(self)
+
+
+def _any_tracer(tree) -> bool:
+    return any(isinstance(x, jax.core.Tracer) for x in jax.tree.leaves(tree))
+
+
+def _is_symbolic_zero(x) -> bool:
+    return isinstance(x, jax.custom_derivatives.SymbolicZero)
+
+
+def _instantiate(x):
+    # A symbolic zero cotangent as an array (float0 for integer outputs).
+    if _is_symbolic_zero(x):
+        if x.aval.dtype == jax.dtypes.float0:
+            return np.zeros(x.aval.shape, x.aval.dtype)
+        return jnp.zeros(x.aval.shape, x.aval.dtype)
+    return x
+
 
 def _aval_key(x):
     if isinstance(x, (float, complex)):
@@ -241,6 +264,7 @@ class CachedJit:
         self._seen: set = set()
         self._lock = threading.Lock()
         self._counts = collections.Counter()
+        self._apply: dict = {}
         functools.update_wrapper(self, fn)
 
     def prepare(self, *args) -> PreparedCall:
@@ -303,6 +327,92 @@ class CachedJit:
     def _run(self, call: PreparedCall):
         nested = call.signature is None  # a tracer among the arguments
         return call_top_level(lambda n: self._program(call.key, n), nested, call.dynamic)
+
+    def call_with_vjp(self, call: PreparedCall):
+        """`call()` with a `jax.custom_vjp` at this boundary: under reverse mode the
+        forward pass runs a cached program that returns the values and the VJP's
+        residuals (`jax.vjp` of the function, differentiated in the perturbed arguments
+        only), and the backward pass a cached program that applies it. A top-level
+        `jax.grad` then calls both as top-level programs, compiled once per structure
+        with `compiler_options()`, rather than having JAX split and compile the
+        differentiated program itself without them. A call with no tracer among its
+        arguments cannot be differentiated and is the plain call."""
+        if call.signature is not None:
+            return self._call(call)
+        try:
+            return self._run_vjp(call)
+        except _HOIST_ERRORS:
+            if call.key[0] != "hoisted":
+                raise
+            with self._lock:
+                self._programs.pop(call.key, None)
+                self._static_only.add(call.key)
+                self._counts["fallbacks"] += 1
+            return self.prepare_static(call).with_vjp()
+
+    def _run_vjp(self, call: PreparedCall):
+        key = call.key
+        box = {}  # the perturbed arguments, from the forward pass to the backward pass
+
+        @jax.custom_vjp
+        def run(*dynamic):
+            return self._run(PreparedCall(self, key, list(dynamic), call.args))
+
+        def run_fwd(*primals):
+            dynamic = [p.value for p in primals]
+            box["perturbed"] = perturbed = tuple(bool(p.perturbed) for p in primals)
+            nested = _any_tracer(dynamic)
+            program = lambda n: self._vjp_program(key, perturbed, n)  # noqa: E731
+            return call_top_level(program, nested, dynamic)
+
+        def run_bwd(vjp_fn, cotangent):
+            cotangent = jax.tree.map(_instantiate, cotangent, is_leaf=_is_symbolic_zero)
+            nested = _any_tracer((vjp_fn, cotangent))
+            grads = iter(call_top_level(self._apply_vjp, nested, vjp_fn, cotangent))
+            return tuple(next(grads) if p else None for p in box["perturbed"])
+
+        run.defvjp(run_fwd, run_bwd, symbolic_zeros=True)
+        return run(*call.dynamic)
+
+    def _vjp_program(self, key, perturbed: tuple, nested: bool):
+        # The forward program of reverse mode: values and `jax.vjp`'s residuals, as a
+        # `jax.vjp` function (a pytree of arrays), differentiated in the perturbed
+        # arguments only.
+        vjp_key = ("vjp", key, perturbed)
+        with self._lock:
+            programs = self._programs.get(vjp_key)
+            if programs is None:
+                spec = key[1]
+
+                def vjp_fn(dynamic):
+                    self._counts["traces"] += 1
+
+                    def fn(diff):
+                        it = iter(diff)
+                        full = [next(it) if p else x for x, p in zip(dynamic, perturbed)]
+                        return self.fn(*_rebuild_tree(spec, iter(full)))
+
+                    return jax.vjp(fn, [x for x, p in zip(dynamic, perturbed) if p])
+
+                vjp_fn.__name__ = getattr(self.fn, "__name__", "program") + "_vjp"
+                programs = (
+                    jax.jit(vjp_fn, compiler_options=compiler_options()),
+                    jax.jit(vjp_fn),
+                )
+                self._programs[vjp_key] = programs
+                while len(self._programs) > self.maxsize:
+                    self._programs.popitem(last=False)
+            else:
+                self._programs.move_to_end(vjp_key)
+            return programs[nested]
+
+    def _apply_vjp(self, nested: bool):
+        # The backward program: a `jax.vjp` function applied to a cotangent (one jit;
+        # it compiles once per VJP structure, i.e. per forward program).
+        if nested not in self._apply:
+            options = {} if nested else compiler_options()
+            self._apply[nested] = jax.jit(lambda f, ct: f(ct)[0], compiler_options=options)
+        return self._apply[nested]
 
     def prepare_static(self, call: PreparedCall) -> PreparedCall:
         args = _rebuild_tree(call.key[1], iter(call.dynamic))

@@ -1,5 +1,7 @@
 """The compiled time loop: the only importer of `equinox.internal`."""
 
+import dataclasses
+
 import equinox as eqx
 import equinox.internal as eqxi
 import jax
@@ -12,6 +14,7 @@ from ._model import Model
 from ._results import RESULTS
 from ._solution import AttemptLog, Solution
 from ._stepper import AbstractStepper
+from ._stored_loop import STORE_BUDGET_BYTES, stored_bytes, stored_while_loop
 
 
 class _LoopState(eqx.Module):
@@ -210,6 +213,25 @@ def attempt(
     controller's decision, the counters and (on acceptance) the buffers, or the states at
     the `t_eval` inside the step when the steps are not saved. Also usable outside the loop
     for manual stepping."""
+    new, rows, accept = _advance(
+        s, model, stepper, controller, t1, args, error_mask, progress, t_eval
+    )
+    return _write_rows(new, rows, s.n_accepted + 1, accept)
+
+
+def _write_rows(s: _LoopState, rows: dict, idx, accept) -> _LoopState:
+    # The accepted step's row of each saved-step buffer (none without saved steps).
+    def put(buf, x):
+        return None if buf is None else eqxi.buffer_at_set(buf, idx, x, pred=accept)
+
+    return dataclasses.replace(
+        s, **{name: put(getattr(s, name), rows[name]) for name in _STEP_FIELDS}
+    )
+
+
+def _advance(s: _LoopState, model, stepper, controller, t1, args, error_mask, progress, t_eval):
+    # `attempt` without the buffer writes: the new state (buffers as they were), the row
+    # of each saved-step buffer, and whether the step was accepted.
     h_min = s.h_min
     h_max = controller.bounds[1]
     remaining = t1 - s.t
@@ -260,11 +282,6 @@ def attempt(
         h_next = jnp.where(cut & accept, jnp.minimum(h_next, h_try), h_next)
     t_new = jnp.where(accept, jnp.where(last, t1, s.t + h_step), s.t)
     y_new = jnp.where(accept, out.y1, s.y)
-    idx = s.n_accepted + 1
-
-    def put(buf, x):
-        return None if buf is None else eqxi.buffer_at_set(buf, idx, x, pred=accept)
-
     y_eval = s.y_eval
     if y_eval is not None:
         final = accept & last
@@ -275,7 +292,16 @@ def attempt(
         attempts = _log_attempt(attempts, s.n_attempts, s.t, h_try, accept, err, out.stats)
     if progress is not None:
         progress(t_new)
-    return _LoopState(
+    rows = dict(
+        ts=t_new,
+        ys=y_new,
+        hs=h_step,
+        multipliers=out.multipliers,
+        iterations=out.stats.iterations.astype(jnp.int32),
+        residual_norms=out.stats.residual_norm,
+        nonlinear_success=nonlinear_ok,
+    )
+    new = _LoopState(
         t=t_new,
         h=h_next,
         h_last=h_try,
@@ -287,16 +313,11 @@ def attempt(
         n_attempts=s.n_attempts + 1,
         n_iterations=s.n_iterations + out.stats.iterations.astype(jnp.int32),
         result=result,
-        ts=put(s.ts, t_new),
-        ys=put(s.ys, y_new),
-        hs=put(s.hs, h_step),
-        multipliers=put(s.multipliers, out.multipliers),
-        iterations=put(s.iterations, out.stats.iterations.astype(jnp.int32)),
-        residual_norms=put(s.residual_norms, out.stats.residual_norm),
-        nonlinear_success=put(s.nonlinear_success, nonlinear_ok),
+        **{name: getattr(s, name) for name in _STEP_FIELDS},
         attempts=attempts,
         y_eval=y_eval,
     )
+    return new, rows, accept
 
 
 def _events(model, stepper, s, h_try, out, args):
@@ -406,6 +427,23 @@ def run(
     def body(s: _LoopState):
         return attempt(s, model, stepper, controller, t1, args, error_mask, progress, t_eval)
 
+    if kind == "checkpointed" and stores_every_step(state, max_steps, checkpoints):
+        return finish(
+            _stored_run(
+                cond,
+                state,
+                model,
+                stepper,
+                controller,
+                t1,
+                args,
+                error_mask,
+                progress,
+                t_eval,
+                max_steps,
+            ),
+            t1,
+        )
     final = eqxi.while_loop(
         cond,
         body,
@@ -416,6 +454,37 @@ def run(
         checkpoints=checkpoints if kind == "checkpointed" else None,
     )
     return finish(final, t1)
+
+
+def stores_every_step(state: _LoopState, max_steps: int, checkpoints: int | None) -> bool:
+    """Whether reverse mode stores the loop state of every attempt (`_stored_loop`): with
+    `checkpoints` of `max_steps` (clipped there), or by default (`None`) when the states
+    fit `STORE_BUDGET_BYTES`. Not with `save_attempts` (its log is loop state)."""
+    if state.attempts is not None:
+        return False
+    if checkpoints is not None:
+        return checkpoints >= max_steps
+    core = dataclasses.replace(state, **_NO_STEPS)
+    return stored_bytes(core, max_steps) <= STORE_BUDGET_BYTES
+
+
+def _stored_run(
+    cond, state, model, stepper, controller, t1, args, error_mask, progress, t_eval, max_steps
+) -> _LoopState:
+    # The loop with every attempt's state stored for reverse mode; the saved-step buffers
+    # are written by the loop from the rows each step returns.
+    names = [name for name in _STEP_FIELDS if getattr(state, name) is not None]
+    core = dataclasses.replace(state, **_NO_STEPS)
+
+    def step(s: _LoopState):
+        new, rows, accept = _advance(
+            s, model, stepper, controller, t1, args, error_mask, progress, t_eval
+        )
+        return new, {name: rows[name] for name in names}, s.n_accepted + 1, accept
+
+    buffers = {name: getattr(state, name) for name in names}
+    final, buffers = stored_while_loop(cond, step, core, buffers, max_steps)
+    return dataclasses.replace(final, **buffers)
 
 
 def interpolate(sol: Solution, t_eval, model: Model | None = None, args=None, stepper=None):

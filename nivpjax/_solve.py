@@ -99,17 +99,24 @@ def solve(
     - `adjoint`: `"checkpointed"` (default) supports reverse-mode differentiation;
       `"forward"` uses a plain `lax.while_loop` (forward mode only, a little faster).
     - `checkpoints`: with `adjoint="checkpointed"`, how many loop states reverse mode may
-      store (`None` or a positive int). `None` (default) lets equinox choose
-      $O(\sqrt{\text{max\_steps}})$ (90 for `max_steps=4096`); a run that attempts more
-      steps than there are checkpoints recomputes steps from the stored ones (online
-      Stumm–Walther checkpointing). A value of at least
-      `max_steps` (larger values are clipped to it) stores every attempted step: nothing is
-      recomputed and equinox skips the checkpoint schedule, typically the fastest reverse
-      mode (`benchmarks/gradients.py`: value_and_grad 2.6–3.1x the forward solve instead
-      of 4.6–5.6x), for `max_steps` copies of the loop state (time, step sizes, state
-      vector, controller state; not the output buffers), allocated up front (per batch
-      member under `vmap`). Values and gradients do not depend on it (up to round-off);
-      only the cost of reverse mode does.
+      store (`None` or a positive int). `None` (default): every attempted step, when
+      `max_steps` copies of the loop state (time, step sizes, state vector, controller
+      state; not the output buffers) fit in 64 MiB (per batch member under `vmap`). The
+      forward pass then stores, per attempt, the residuals of the step's VJP (or, when
+      those exceed 64 MiB in all, the loop state, linearised again on the way back;
+      `nivpjax._stored_loop`), and reverse mode recomputes no step. When they do not
+      fit, equinox's online Stumm–Walther checkpointing with
+      $O(\sqrt{\text{max\_steps}})$ checkpoints (90 for `max_steps=4096`), which
+      recomputes steps from the stored ones. A value of at least `max_steps` (larger
+      values are clipped to it) stores every step whatever the memory; a smaller value
+      selects equinox's checkpointing with that many, which suits a `jax.vmap` of many
+      gradients (the default's storage, allocated up front, is per member, e.g. 5.8 MB
+      for the default ball and 14.6 MB for the relay at `max_steps=4096`). Values and
+      gradients do not depend on it (up to round-off); only the cost of reverse mode
+      does. Under `jax.grad`, the solve's reverse mode
+      runs two cached programs of its own (the forward pass with the stored values,
+      and the backward pass), compiled with `nj.compiler_options()` when the gradient
+      is taken at top level: a second gradient of the same structure compiles nothing.
     - `progress`: print a progress bar to stderr.
     - `throw`: raise [`nivpjax.SolveError`][] if the run failed (`max_steps` reached, step
       size below `h_min`, repeated nonlinear failures). With `False` the failure is only in
@@ -171,7 +178,10 @@ def solve(
     )
     if not call.known:  # traces the user's function: only for a new structure or new types
         v.check_vector_field(vector_field, t0, y0, args)
-    sol = call()
+    # Reverse mode through the checkpointed adjoint runs compiled programs of its own
+    # (`CachedJit.call_with_vjp`): cached, and with nivpjax's compiler options under a
+    # top-level `jax.grad`.
+    sol = call.with_vjp() if adjoint == "checkpointed" else call()
     if throw and not traced:
         sol = _raise_if_failed(sol)
     return sol
