@@ -134,6 +134,10 @@ def solve(
     max_steps = v.check_max_steps(max_steps)
     projector, stepper, controller = v.check_components(projector, stepper, controller, n)
     checkpoints = v.check_modes(error_estimate, adjoint, checkpoints, max_steps)
+    if checkpoints is None and adjoint == "checkpointed" and v.is_batched((y0, t0, t1, args)):
+        # Under `vmap` the stored loop's rows would be allocated per member (MBs each):
+        # equinox's checkpoints instead, as a `checkpoints` below `max_steps` asks.
+        checkpoints = v.equinox_checkpoints(max_steps)
     tau_arr = v.check_tau(tau, n)
     equation_rows = v.check_equation_rows(equation_rows, n)
     v.check_step_bounds(controller, h0)

@@ -21,6 +21,18 @@ def is_traced(x) -> bool:
     return any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree.leaves(x))
 
 
+def is_batched(x) -> bool:
+    """Whether a leaf of `x` is batched by a `jax.vmap` around this call, seen through the
+    tracers of transformations inside it (a `grad`, a `jit`). A `jit` between the `vmap`
+    and the call hides it: its function is traced unbatched."""
+    for leaf in jax.tree.leaves(x):
+        while isinstance(leaf, jax.core.Tracer):
+            if type(leaf).__name__ == "BatchTracer":
+                return True
+            leaf = getattr(leaf, "val", getattr(leaf, "primal", None))
+    return False
+
+
 def concrete_float(name, value):
     if is_traced(value):
         return None
@@ -175,6 +187,12 @@ def check_components(projector, stepper, controller, n):
     if not isinstance(controller, AbstractController):
         raise TypeError(f"`controller` must be an AbstractController, got {controller!r}.")
     return projector, stepper, controller
+
+
+def equinox_checkpoints(max_steps: int) -> int:
+    """The checkpoint count equinox's checkpointed loop chooses for `max_steps` by default
+    (its online Stumm-Walther schedule, of order sqrt(max_steps): 90 for 4096)."""
+    return min(max(math.floor(-1.5 + math.sqrt(2 * max_steps + 0.25)) + 1, 1), max_steps)
 
 
 def check_modes(error_estimate, adjoint, checkpoints, max_steps):

@@ -128,3 +128,23 @@ def test_under_jit_and_vmap(stored):
     batched = jax.vmap(jax.grad(_loss))(es)
     np.testing.assert_allclose(batched[1], grad, rtol=1e-12, atol=0)
     np.testing.assert_allclose(batched[0], jax.grad(_loss)(es[0]), rtol=1e-12, atol=0)
+
+
+def test_vmap_keeps_equinox_checkpoints(monkeypatch):
+    # Under vmap the stored rows would be allocated per member: the default is equinox's
+    # own schedule there (31 checkpoints for max_steps=512), top level stores every step.
+    seen = []
+    original = _loop.stores_every_step
+
+    def spy(state, max_steps, checkpoints):
+        seen.append(checkpoints)
+        return original(state, max_steps, checkpoints)
+
+    monkeypatch.setattr(_loop, "stores_every_step", spy)
+    _solve_jit.cache_clear()
+    jax.vmap(jax.grad(_final))(jnp.array([0.85, 0.8]))
+    assert seen and set(seen) == {31}
+    seen.clear()
+    jax.grad(_final)(E)
+    assert seen and set(seen) == {None}
+    _solve_jit.cache_clear()
