@@ -378,7 +378,7 @@ def friction_bowl_state(t, phi0, om0, mu, g, R):
 
 
 def ellipse_bowl_state(t, s0, sd0, a, b, g):
-    """`(q1, q2, v1, v2)` at the times `t` (array) of a ball on the wall of the elliptic bowl
+    r"""`(q1, q2, v1, v2)` at the times `t` (array) of a ball on the wall of the elliptic bowl
     from parameter `s0` at rate `sd0`; DOP853 at rtol 1e-12. Also the normal force
     $N = \kappa |v|^2 + g\,n_y$ per unit mass (it must stay positive: on the wall)."""
 
