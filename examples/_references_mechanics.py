@@ -389,15 +389,14 @@ def ellipse_bowl_state(t, s0, sd0, a, b, g):
         return [sd, -(qs @ qss * sd**2 + g * qs[1]) / (qs @ qs)]
 
     t = np.atleast_1d(np.asarray(t, float))
-    sol = solve_ivp(
-        rhs, (0.0, float(t.max())), [s0, sd0], method="DOP853", rtol=1e-12, atol=1e-14, t_eval=t
-    )
-    s, sd = sol.y
+    t_end = max(float(t.max()), 1e-12)
+    kw = dict(method="DOP853", rtol=1e-12, atol=1e-14, dense_output=True)
+    s, sd = solve_ivp(rhs, (0.0, t_end), [s0, sd0], **kw).sol(t)
     q = np.stack([a * np.sin(s), -b * np.cos(s)], -1)
     qs = np.stack([a * np.cos(s), b * np.sin(s)], -1)
     qss = np.stack([-a * np.sin(s), b * np.cos(s)], -1)
     v = qs * sd[:, None]
-    acc = qss * sd[:, None] ** 2 + qs * np.array([rhs(0, z)[1] for z in sol.y.T])[:, None]
+    acc = qss * sd[:, None] ** 2 + qs * np.array([rhs(0, z)[1] for z in zip(s, sd)])[:, None]
     inward = -np.stack([q[:, 0] / a**2, q[:, 1] / b**2], -1)
     inward /= np.linalg.norm(inward, axis=1, keepdims=True)
     normal = np.sum((acc + np.array([0.0, g])) * inward, axis=1)

@@ -300,7 +300,7 @@ def ball_in_bowl(
     $q'' = -g\,e_d$ with the unilateral contact $g(q) = R - |q| \ge 0$ and Newton
     restitution $e$, in as many dimensions as `position` has (2: a circular wall, 3: a
     sphere; gravity along the last axis). State $x = (q, v)$; `args = {"R", "g", "e"}`
-    (and `"mu"` with friction).
+    (and `"mu"` with friction, `"axes"` with axes).
 
     A closed contact on a curved gap: while the ball stays on the wall it is a pendulum,
     $\varphi'' = -(g/R)\sin\varphi$ in 2-D ($\varphi$ from the bottom), pressed by the
@@ -310,17 +310,17 @@ def ball_in_bowl(
     the wall again. With `gravity=0` it is a bead running uniformly round a circular wall
     that pushes with $v^2/R$.
 
-    - `friction`: Coulomb's $\mu$ on the wall (`None`: frictionless). In 2-D, sliding,
-
-    $$ \varphi'' = -\tfrac{g}{R}\sin\varphi - \mu\,\sigma\,N/R, \quad
-    \sigma = \operatorname{sign}\varphi', $$
-
-      until $\varphi' = 0$, where the ball sticks for good if $|\tan\varphi| \le \mu$
-      and turns back otherwise.
+    - `friction`: Coulomb's $\mu$ on the wall (`None`: frictionless; see
+      [`nivpjax.FrictionalContact`][]).
     - `axes`: semi-axes $a_i$ of an ellipsoidal bowl (`radius` is then unused), gap
       $a_{\min}(1 - |D^{-1} q|)$ with $D = \operatorname{diag}(a)$: zero on the wall,
       $R - |q|$ for equal axes, a distance to first order up to the factor
       $a_{\min} |\nabla\,|D^{-1}q|| \le 1$. Its curvature varies along the wall.
+
+    With friction, in 2-D, the ball slides on the wall with
+    $\varphi'' = -(g/R)\sin\varphi - \mu\,\sigma N/R$, $\sigma$ the sign of
+    $\varphi'$, until $\varphi' = 0$: there it sticks for good if
+    $|\tan\varphi| \le \mu$ and turns back otherwise.
     """
     d = len(position)
     if d < 2 or len(velocity) != d:
