@@ -31,6 +31,7 @@ TE = "tests/test_estimates.py::"
 TEV = "tests/test_event_prediction.py::"
 TS = "tests/test_sensitivities.py::"
 TC = "tests/test_compat.py::"
+TBF = "tests/test_bowl_friction.py::"
 
 MUTANTS = [
     # ---------------------------------------------------------------- projectors and JVPs
@@ -1422,6 +1423,63 @@ MUTANTS = [
             "tests/test_curved_contact.py::test_held_on_the_wall_with_its_reaction[bathe]",
             "tests/test_curved_contact.py::test_adaptive_error_falls_with_rtol[bowl-bathe]",
         ),
+    ),
+    Mutant(
+        "frictional_contact_on_normal_part",
+        "projectors",
+        P + "contact_friction.py",
+        "tangential = out - n * jnp.dot(n, out)",
+        "tangential = out",
+        "FrictionalContact: friction acts on the tangential part of the velocity only (the "
+        "normal part is the contact's)",
+        (TBF + "test_order_at_fixed_steps[bathe]", TBF + "test_slide_to_stick[bathe]"),
+    ),
+    Mutant(
+        "frictional_contact_bound_halved",
+        "projectors",
+        P + "contact_friction.py",
+        "return out - project_ball(tangential, mu * _safe_norm(out - z))",
+        "return out - project_ball(tangential, 0.5 * mu * _safe_norm(out - z))",
+        "FrictionalContact: the friction impulse is bounded by mu times the normal impulse",
+        (TBF + "test_order_at_fixed_steps[bathe]", TBF + "test_slide_to_stick[bathe]"),
+    ),
+    Mutant(
+        "frictional_contact_no_stop_violation",
+        "projectors",
+        P + "contact_friction.py",
+        "through = closed & (s1 < 0)",
+        "through = closed & (s1 < -jnp.inf)",
+        "FrictionalContact.violation: a tangential velocity through zero inside a step (a "
+        "stop: stick or turn) is charged, so the step is cut there",
+        (TBF + "test_slide_to_stick[bathe]", TBF + "test_slide_to_stick[tr]"),
+    ),
+    Mutant(
+        "frictional_contact_stop_not_predicted",
+        "projectors",
+        P + "contact_friction.py",
+        "stop = jnp.where(closed, secant_crossing(s0, s1, ctx.h), jnp.inf)",
+        "stop = jnp.full_like(s0, jnp.inf)",
+        "FrictionalContact.next_event: the stop predicted along the tangential speed's secant",
+        (TBF + "test_slide_to_stick[bathe]", TBF + "test_slide_to_stick[tr]"),
+    ),
+    Mutant(
+        "persistent_teval_linear",
+        "interpolation",
+        "nivpjax/_loop.py",
+        "y = jnp.where(rows, cubic_hermite(y0, y1, h * p0, h * p1, w), y)",
+        "y = jnp.where(rows, y, y)",
+        "t_eval on a curved contact pressed at both ends: cubic Hermite with the law's rates "
+        "(linear velocities: 56x the steps' error)",
+        (TBF + "test_t_eval_as_accurate_as_the_steps[bathe]",),
+    ),
+    Mutant(
+        "persistent_teval_start_rate_free",
+        "interpolation",
+        "nivpjax/_loop.py",
+        "p0, p1 = model.to_state(f0 + law0), model.to_state(f1 + law1)",
+        "p0, p1 = model.to_state(f0), model.to_state(f1 + law1)",
+        "t_eval on a persistent contact: the start's rate includes the law's reaction",
+        (TBF + "test_t_eval_as_accurate_as_the_steps[bathe]",),
     ),
     Mutant(
         "curved_contact_not_weighed",
