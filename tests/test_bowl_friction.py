@@ -194,3 +194,30 @@ def test_bad_friction_and_axes():
     scene = nj.Scene(lambda t, x, a, m: jnp.concatenate([x[2:], jnp.zeros(2)]), 4, (contact,))
     with pytest.raises(ValueError, match="`friction` needs one contact"):
         scene.solve(0.0, 1.0, jnp.zeros(4), None)
+
+
+def test_friction_at_an_elastic_impact_is_tangential():
+    # A ball hitting the wall at its bottom, v = (1, -2), restitution 0.5: Newton's law
+    # gives the normal impulse p = (1 + e) 2 = 3 (normal velocity +1 after), the friction
+    # impulse mu p = 0.9 takes the tangential velocity from 1 to 0.1 and leaves the normal
+    # rebound alone: (0.1, 1.0). Friction on the whole velocity would shorten the rebound.
+    def gap(t, y, a):
+        return jnp.stack([1.0 - jnp.linalg.norm(y[:2])])
+
+    def normals(t, y, a):
+        return (-y[:2] / jnp.linalg.norm(y[:2]))[None, :]
+
+    contact = nj.UnilateralContact(gap, normals, restitution=0.5)
+    projector = nj.FrictionalContact(contact, jnp.asarray(0.3))
+    y = jnp.array([0.0, -1.0, 1.0, -2.0])
+    ctx = nj.ProjectionContext(
+        t=jnp.asarray(0.0),
+        h=jnp.asarray(1e-3),
+        y_prev=y,
+        y_iter=y,
+        rho=jnp.full(2, 1e-3),
+        args=None,
+        block=(2, 3),
+    )
+    np.testing.assert_allclose(projector(y[2:], ctx), [0.1, 1.0], atol=1e-14)
+    np.testing.assert_allclose(projector.impact(ctx), [0.1, 1.0], atol=1e-14)
