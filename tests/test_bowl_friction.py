@@ -125,12 +125,15 @@ def test_slide_to_stick(stepper):
     # - the gap below atol + rtol R at every step (held: round-off);
     # - the reaction on the velocity rows inside its cone at every step: N >= 0 along the
     #   inward normal, |r_t| <= mu N;
-    # - the stick reached at t* = 1.3885 (within 0.01 and 5e-4) and held: velocity zero,
-    #   position fixed, to the end.
+    # - the stick reached at t* = 1.3885 (within 0.01, and 1e-4 or BE 5e-4) and held:
+    #   velocity zero, position fixed, to the end.
     _, t_stick = friction_bowl_state(np.array([2.0]), 0.0, V0, MU, G, 1.0)
     power, C = (0.5, 8.0) if stepper == "be" else (2 / 3, 2.0)
     errors = []
-    for rtol, stick_tol in ((1e-4, 1e-2), (1e-6, 5e-4)):
+    # Stick time: second order 1e-4 at rtol 1e-6 (measured 2.7e-5 with the stop predicted
+    # along its secant, 6.8e-4 without).
+    fine = 5e-4 if stepper == "be" else 1e-4
+    for rtol, stick_tol in ((1e-4, 1e-2), (1e-6, fine)):
         ts, ys, mult, _ = _adaptive(stepper, "slide", rtol)
         q, v = ys[:, :2], ys[:, 2:4]
         gap = 1.0 - np.linalg.norm(q, axis=1)
@@ -147,7 +150,7 @@ def test_slide_to_stick(stepper):
         )
         moving = np.linalg.norm(v, axis=1) > 1e-12
         k = np.nonzero(moving)[0].max() + 1
-        assert abs(ts[k] - t_stick) < stick_tol, (ts[k], t_stick)
+        assert abs(ts[k] - t_stick) < stick_tol, (rtol, ts[k] - t_stick)
         assert ts[k] < 1.9
         np.testing.assert_allclose(q[k:], np.broadcast_to(q[k], q[k:].shape), atol=1e-14)
     assert errors[1] < errors[0] / 8, errors
