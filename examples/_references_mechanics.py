@@ -316,6 +316,94 @@ def bowl_state(t, v0, g, t_end=None):
 
 
 # ----------------------------------------------------------------------------------------------
+# A ball sliding on a circular wall of radius R with Coulomb friction mu (2-D, never leaving it):
+# phi'' = -(g/R) sin(phi) - mu sign(phi') (phi'^2 + (g/R) cos(phi)) while it slides; at phi' = 0 it
+# sticks for good where |tan(phi)| <= mu and turns back otherwise.
+
+
+def friction_bowl_pieces(phi0, om0, mu, g, R, t_end):
+    """The slide phases of the ball, as `(pieces, t_stick)`: `pieces` a list of
+    `(t_start, t_end, dense)` with `dense(t) -> (phi, phi')`, `t_stick` the time it sticks
+    (`inf` if not before `t_end`); DOP853 at rtol 1e-12, each stop located as an event."""
+    pieces, t0, phi, om = [], 0.0, float(phi0), float(om0)
+    while t0 < t_end:
+        sigma = np.sign(om) if om != 0 else -np.sign(np.sin(phi))
+        if om == 0 and abs(np.tan(phi)) <= mu:
+            return pieces, t0
+
+        def rhs(t, s, sigma=sigma):
+            return [s[1], -(g / R) * np.sin(s[0]) - mu * sigma * (s[1] ** 2 + g / R * np.cos(s[0]))]
+
+        def stop(t, s):
+            return s[1]
+
+        stop.terminal, stop.direction = True, -sigma
+        sol = solve_ivp(
+            rhs,
+            (t0, t_end),
+            [phi, om],
+            method="DOP853",
+            rtol=1e-12,
+            atol=1e-14,
+            dense_output=True,
+            events=stop,
+        )
+        stopped = len(sol.t_events[0]) > 0
+        t1 = sol.t_events[0][0] if stopped else t_end
+        pieces.append((t0, t1, sol.sol))
+        if not stopped:
+            break
+        t0, phi, om = t1, float(sol.sol(t1)[0]), 0.0
+    return pieces, np.inf
+
+
+def friction_bowl_state(t, phi0, om0, mu, g, R):
+    """`(q1, q2, v1, v2)` of the sliding ball at the times `t` (array), at rest after its
+    stick; and the stick time."""
+    t = np.atleast_1d(np.asarray(t, float))
+    pieces, t_stick = friction_bowl_pieces(phi0, om0, mu, g, R, float(t.max()))
+    out = np.empty((t.size, 4))
+    for i, ti in enumerate(t):
+        a, b, dense = next((p for p in pieces if ti <= p[1]), pieces[-1])
+        phi, om = dense(min(ti, b))
+        om = 0.0 if ti >= t_stick else om
+        out[i] = [R * np.sin(phi), -R * np.cos(phi), R * om * np.cos(phi), R * om * np.sin(phi)]
+    return out, t_stick
+
+
+# ----------------------------------------------------------------------------------------------
+# A ball on the wall of an elliptic bowl (x/a)^2 + (y/b)^2 = 1, frictionless, pressed onto it:
+# q = (a sin s, -b cos s), the constrained Lagrangian in the angle parameter s,
+# |q_s|^2 s'' + (q_s . q_ss) s'^2 = -g y_s.
+
+
+def ellipse_bowl_state(t, s0, sd0, a, b, g):
+    r"""`(q1, q2, v1, v2)` at the times `t` (array) of a ball on the wall of the elliptic bowl
+    from parameter `s0` at rate `sd0`; DOP853 at rtol 1e-12. Also the normal force
+    $N = \kappa |v|^2 + g\,n_y$ per unit mass (it must stay positive: on the wall)."""
+
+    def rhs(t, z):
+        s, sd = z
+        qs = np.array([a * np.cos(s), b * np.sin(s)])
+        qss = np.array([-a * np.sin(s), b * np.cos(s)])
+        return [sd, -(qs @ qss * sd**2 + g * qs[1]) / (qs @ qs)]
+
+    t = np.atleast_1d(np.asarray(t, float))
+    t_end = max(float(t.max()), 1e-12)
+    kw = dict(method="DOP853", rtol=1e-12, atol=1e-14, dense_output=True)
+    s, sd = solve_ivp(rhs, (0.0, t_end), [s0, sd0], **kw).sol(t)
+    q = np.stack([a * np.sin(s), -b * np.cos(s)], -1)
+    qs = np.stack([a * np.cos(s), b * np.sin(s)], -1)
+    qss = np.stack([-a * np.sin(s), b * np.cos(s)], -1)
+    v = qs * sd[:, None]
+    acc = qss * sd[:, None] ** 2 + qs * np.array([rhs(0, z)[1] for z in zip(s, sd)])[:, None]
+    inward = -np.stack([q[:, 0] / a**2, q[:, 1] / b**2], -1)
+    inward /= np.linalg.norm(inward, axis=1, keepdims=True)
+    normal = np.sum((acc + np.array([0.0, g])) * inward, axis=1)
+    return np.concatenate([q, v], 1), normal
+
+
+# ----------------------------------------------------------------------------------------------
 # Example utilities.
 
 

@@ -41,6 +41,7 @@ from ._projector import (
     CoulombFriction as CoulombFriction,
     CustomProjector as CustomProjector,
     EventLocated as EventLocated,
+    FrictionalContact as FrictionalContact,
     HeldGaps as HeldGaps,
     Identity as Identity,
     NonNegative as NonNegative,

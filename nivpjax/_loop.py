@@ -568,6 +568,8 @@ def _in_step(model: Model, t, w, t0, y0, t1, y1, args, stepper=None):
         projected = jnp.asarray(model.projector.acts_on(y0.shape[0]))
         hermite = cubic_hermite(y0, y1, h * r0, h * r1, w)
         y = jnp.where(model.algebraic | projected, linear, hermite)
+        if model.has_weighed:
+            y = _persistent(model, t0, y0, f0, t1, y1, f1, h, w, args, y)
         return _selections(model, t, t0, y0, t1, y1, y, args)
     p0, held0 = model.projected_rate(t0, h, y0, f0, args)
     p1, held1 = model.projected_rate(t1, h, y1, f1, args)
@@ -621,6 +623,23 @@ def interpolate_multipliers(sol: Solution, t_eval, y_eval, model: Model, args=No
     safe_y = jnp.where(jnp.isfinite(y_eval), y_eval, 0.0)
     out = jax.vmap(lambda t, h, y: model.reaction_at(t, h, y, args))(t_eval, h, safe_y)
     return jnp.where(jnp.isnan(y_eval), jnp.nan, out)
+
+
+def _persistent(model: Model, t0, y0, f0, t1, y1, f1, h, w, args, y):
+    # Models with impulses, on the weighed rows whose law's reaction acts at both ends (a
+    # contact pressed by the flow at both ends, its friction): no impulse in the step (an
+    # impact starts from a contact that is not pressed), so the cubic Hermite with the
+    # law's rates f + r, and a stick reached inside the step as on friction rows
+    # (`_stuck`). Elsewhere `y` is kept (linear on the rows a projector moves).
+    law0 = model.law_reaction(t0, h, y0, f0, args)
+    law1 = model.law_reaction(t1, h, y1, f1, args)
+    p0, p1 = model.to_state(f0 + law0), model.to_state(f1 + law1)
+    rows = model.weighed & (law0 != 0) & (law1 != 0)
+    y = jnp.where(rows, cubic_hermite(y0, y1, h * p0, h * p1, w), y)
+    small = jnp.sqrt(jnp.finfo(y0.dtype).eps) * (jnp.abs(p0) + jnp.abs(model.to_state(f1)))
+    stuck = rows & (jnp.abs(p0) > small) & (jnp.abs(p1) <= small)
+    da0 = h * _rate_change(model, t0, y0, p0, args)
+    return jnp.where(stuck, _stuck(y0, y1, p0, da0, h, w), y)
 
 
 def _rate_change(model: Model, t, y, rate, args):

@@ -288,12 +288,19 @@ def filippov_spiral(stiffness=300.0, coupling=0.02, x0=(5.0, 8.0)):
 
 
 def ball_in_bowl(
-    radius=1.0, gravity=9.81, position=(0.0, -1.0), velocity=(1.0, 0.0), restitution=0.0
+    radius=1.0,
+    gravity=9.81,
+    position=(0.0, -1.0),
+    velocity=(1.0, 0.0),
+    restitution=0.0,
+    friction=None,
+    axes=None,
 ):
     r"""A ball (a point of unit mass) inside a spherical bowl of radius $R$ under gravity:
     $q'' = -g\,e_d$ with the unilateral contact $g(q) = R - |q| \ge 0$ and Newton
     restitution $e$, in as many dimensions as `position` has (2: a circular wall, 3: a
-    sphere; gravity along the last axis). State $x = (q, v)$; `args = {"R", "g", "e"}`.
+    sphere; gravity along the last axis). State $x = (q, v)$; `args = {"R", "g", "e"}`
+    (and `"mu"` with friction, `"axes"` with axes).
 
     A closed contact on a curved gap: while the ball stays on the wall it is a pendulum,
     $\varphi'' = -(g/R)\sin\varphi$ in 2-D ($\varphi$ from the bottom), pressed by the
@@ -302,6 +309,18 @@ def ball_in_bowl(
     $\cos\varphi_r = (2g R - v_0^2)/(3gR)$, flies a parabola inside the bowl and lands on
     the wall again. With `gravity=0` it is a bead running uniformly round a circular wall
     that pushes with $v^2/R$.
+
+    - `friction`: Coulomb's $\mu$ on the wall (`None`: frictionless; see
+      [`nivpjax.FrictionalContact`][]).
+    - `axes`: semi-axes $a_i$ of an ellipsoidal bowl (`radius` is then unused), gap
+      $a_{\min}(1 - |D^{-1} q|)$ with $D = \operatorname{diag}(a)$: zero on the wall,
+      $R - |q|$ for equal axes, a distance to first order up to the factor
+      $a_{\min} |\nabla\,|D^{-1}q|| \le 1$. Its curvature varies along the wall.
+
+    With friction, in 2-D, the ball slides on the wall with
+    $\varphi'' = -(g/R)\sin\varphi - \mu\,\sigma N/R$, $\sigma$ the sign of
+    $\varphi'$, until $\varphi' = 0$: there it sticks for good if
+    $|\tan\varphi| \le \mu$ and turns back otherwise.
     """
     d = len(position)
     if d < 2 or len(velocity) != d:
@@ -309,16 +328,25 @@ def ball_in_bowl(
             "`position` and `velocity` must have the same length, 2 or more, got "
             f"{len(position)} and {len(velocity)}."
         )
+    if axes is not None:
+        axes = np.asarray(axes, dtype=float)
+        if axes.shape != (d,) or not np.all(np.isfinite(axes)) or np.any(axes <= 0):
+            raise ValueError(
+                f"`axes` must be {d} finite semi-axes > 0 (one per coordinate), got {axes!r}."
+            )
 
     def dynamics(t, x, a, m):
         down = jnp.zeros(d, x.dtype).at[-1].set(-a["g"])
         return jnp.concatenate([x[d:], down])
 
     def gap(t, x, a):
-        sq = jnp.sum(x[:d] ** 2)
+        q = x[:d] if axes is None else x[:d] / a["axes"]
+        sq = jnp.sum(q**2)
         # |q| with a finite derivative at the centre (which a flight may cross).
         norm = jnp.where(sq > 0, jnp.sqrt(jnp.where(sq > 0, sq, 1.0)), 0.0)
-        return jnp.stack([a["R"] - norm])
+        if axes is None:
+            return jnp.stack([a["R"] - norm])
+        return jnp.stack([jnp.min(a["axes"]) * (1.0 - norm)])
 
     contact = Contact(
         gap,
@@ -326,9 +354,14 @@ def ball_in_bowl(
         velocities=np.arange(d, 2 * d),
         restitution=lambda t, y, a: a["e"],
         curved=True,
+        friction=None if friction is None else (lambda t, y, a: a["mu"]),
     )
     x0 = _f([*position, *velocity])
     args = {"R": _f(radius), "g": _f(gravity), "e": _f(restitution)}
+    if friction is not None:
+        args["mu"] = _f(friction)
+    if axes is not None:
+        args["axes"] = _f(axes)
     return Scene(dynamics, 2 * d, (contact,)), x0, args
 
 

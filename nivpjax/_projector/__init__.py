@@ -8,6 +8,7 @@ from .base import (
 from .block import BlockProjector as BlockProjector
 from .box import Box as Box, NonNegative as NonNegative, clip as clip
 from .contact import UnilateralContact as UnilateralContact
+from .contact_friction import FrictionalContact as FrictionalContact
 from .coulomb import CoulombFriction as CoulombFriction
 from .custom import CustomProjector as CustomProjector
 from .held_gap import HeldGaps as HeldGaps

@@ -5,8 +5,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._projector import Bound, HeldGaps, UnilateralContact
-from .base import AbstractEffect, scene_state
+from .._projector import Bound, FrictionalContact, HeldGaps, UnilateralContact
+from .base import AbstractEffect, OnScene, scene_state
 from .curvature import gap_is_affine
 
 
@@ -32,6 +32,12 @@ class Contact(AbstractEffect):
       (zero whatever the state and the parameters: flat; see `resolved`); a projector
       built from an unresolved contact treats it as flat.
 
+    - `friction`: Coulomb's $\mu$ (scalar array or callable `(t, x, args)`), default
+      `None` (frictionless): the contact's impulse $p_n$ then comes with a friction impulse
+      in the tangent plane, $|p_t| \le \mu\,p_n$, opposing the tangential velocity
+      ([`nivpjax.FrictionalContact`][]): a ball sliding or sticking on a wall. One
+      contact (`gap` of length 1) and unit masses only.
+
     The contact normals $W^T = \partial g / \partial q$ come from autodiff of `gap`. See
     [`nivpjax.UnilateralContact`][] for the active set, the LCP and event location.
     """
@@ -44,6 +50,7 @@ class Contact(AbstractEffect):
     lookahead: float = 0.5
     name: str = eqx.field(static=True, default="contact")
     curved: bool | None = eqx.field(static=True, default=None)
+    friction: Bound | None = None
 
     def __init__(
         self,
@@ -55,6 +62,7 @@ class Contact(AbstractEffect):
         lookahead=0.5,
         name="contact",
         curved=None,
+        friction=None,
     ):
         self.gap = gap
         self.positions = tuple(int(i) for i in np.atleast_1d(positions))
@@ -66,11 +74,30 @@ class Contact(AbstractEffect):
         self.lookahead = lookahead
         self.name = name
         self.curved = None if curved is None else bool(curved)
+        if friction is not None and inverse_mass is not None:
+            raise ValueError(
+                "`friction` needs unit masses (`inverse_mass=None`), got an `inverse_mass`."
+            )
+        if friction is not None and not callable(friction):
+            mu = np.asarray(friction)
+            if mu.size != 1 or not np.isfinite(mu).all() or mu.reshape(()) < 0:
+                raise ValueError(
+                    "`friction` must be one finite coefficient >= 0 or a callable, got "
+                    f"{friction!r}."
+                )
+        self.friction = friction
+
+    def _check_gap(self, t, x, args):
+        # Friction is for one contact: the gap's length is read off its shape.
+        m = jax.eval_shape(lambda: jnp.atleast_1d(self.gap(t, x, args))).shape[0]
+        if self.friction is not None and m != 1:
+            raise ValueError(f"`friction` needs one contact (`gap` of length 1), got {m}.")
 
     def resolved(self, t, x, args) -> "Contact":
         """With `curved=None`, this contact with `curved` set: `False` when the Hessian
         of `gap` in the positions is zero whatever the state and the parameters (read
         off its traced program, at trace time), `True` otherwise."""
+        self._check_gap(t, x, args)
         if self.curved is not None:
             return self
         affine = gap_is_affine(self.gap, self.positions, t, x, args)
@@ -87,10 +114,14 @@ class Contact(AbstractEffect):
             lookahead=self.lookahead,
             weighed=bool(self.curved),
         )
+        on_velocities = projector
+        if self.friction is not None:
+            mu = OnScene(self.friction, n_states) if callable(self.friction) else self.friction
+            on_velocities = FrictionalContact(projector, mu)
         if not self.curved:
-            return [(self.velocities, projector)]
+            return [(self.velocities, on_velocities)]
         return [
-            (self.velocities, projector),
+            (self.velocities, on_velocities),
             (self.positions, HeldGaps(projector, self.velocities)),
         ]
 
