@@ -551,7 +551,7 @@ MUTANTS = [
         "theta_defect_dropped",
         "steppers",
         S + "one_leg.py",
-        "    e = e + (1 - theta) * h * defect\n",
+        "    e = jnp.where(jnp.abs(defect) > jnp.abs(e), defect, e)\n",
         "",
         "theta_error's docstring: a scheme averaging the end rates errs by (1 - theta) h |D| "
         "at a jump of the rate",
@@ -562,6 +562,17 @@ MUTANTS = [
             "tests/test_filippov.py::test_invariant_or_failure_code[theta0.7-newton]",
             "tests/test_hard_cases.py::test_sliding_mode_control_without_chattering[tr]",
         ),
+    ),
+    Mutant(
+        "theta_defect_added",
+        "steppers",
+        S + "one_leg.py",
+        "    e = jnp.where(jnp.abs(defect) > jnp.abs(e), defect, e)\n",
+        "    e = e + defect\n",
+        "theta_error's docstring: the defect replaces the estimate where larger, not added "
+        "(added, it cancelled the trapezoidal estimate near a square-root singularity of "
+        "the rate: super-twisting silently wrong at rtol 1e-4 and 1e-6)",
+        (TE + "test_theta_estimate_near_a_square_root_singularity",),
     ),
     Mutant(
         "theta_secant_across_switch",
@@ -951,6 +962,27 @@ MUTANTS = [
             "tests/test_filippov_trust.py::test_forced_relay_leaves_sliding[tr-box-1.3-2.0]",
             "tests/test_filippov_trust.py::test_forced_relay_leaves_sliding[tr-sign-1.3-2.0]",
         ),
+    ),
+    Mutant(
+        "interpolation_second_order_sliding_stage_rates",
+        "events",
+        "nivpjax/_loop.py",
+        "f0, f1 = model.f(t0, ends0, args), model.f(t1, ends1, args)",
+        "f0, f1 = model.f(t0, y0, args), model.f(t1, y1, args)",
+        "_in_step's comment: a second-order sliding mode's end rates take its equivalent "
+        "control, not the stage's ringing selection (super-twisting's t_eval 400x the steps' "
+        "error with the trapezoidal rule)",
+        ("tests/test_twisting.py::test_t_eval_as_right_as_the_steps",),
+    ),
+    Mutant(
+        "second_order_newton_moves_selections",
+        "events",
+        "nivpjax/_held.py",
+        "return jnp.where(model.algebraic, 0.0, _rate(model, tt, yy, args))",
+        "return _rate(model, tt, yy, args)",
+        "_second_order_newton's comment: the second derivative along the flow holds the "
+        "selections (an algebraic row's f is a residual, not a rate)",
+        ("tests/test_twisting.py::test_t_eval_as_right_as_the_steps",),
     ),
     Mutant(
         "held_one_sample",
