@@ -985,6 +985,37 @@ MUTANTS = [
         ("tests/test_twisting.py::test_t_eval_as_right_as_the_steps",),
     ),
     Mutant(
+        "interpolation_end_stage_selection",
+        "events",
+        "nivpjax/_loop.py",
+        "end = held_start(model, t1, h, y1, args)",
+        "end = y1",
+        "_in_step's comment: the end rates take the held phase's selection, not the stage's "
+        "(its average over a step in which a stick begins: a block moving after its stop at "
+        "t_eval)",
+        ("tests/test_twisting.py::test_t_eval_across_a_stop_inside_a_step",),
+    ),
+    Mutant(
+        "come_to_rest_skipped",
+        "events",
+        "nivpjax/_loop.py",
+        "return jnp.where(rest, _stuck(y0, y1, r0, da0, h, w), y)",
+        "return y",
+        "_come_to_rest's comment: a row at rest at the end of a step in which a phase begins "
+        "follows the flow up to its stop, not a cubic bent to arrive with zero rate",
+        ("tests/test_twisting.py::test_t_eval_across_a_stop_inside_a_step",),
+    ),
+    Mutant(
+        "come_to_rest_curvature_sign",
+        "events",
+        "nivpjax/_loop.py",
+        "return jnp.where(rest, _stuck(y0, y1, r0, da0, h, w), y)",
+        "return jnp.where(rest, _stuck(y0, y1, r0, -da0, h, w), y)",
+        "_come_to_rest's comment: the flow from the start to second order (a block's "
+        "position under its constant deceleration)",
+        ("tests/test_twisting.py::test_t_eval_across_a_stop_inside_a_step",),
+    ),
+    Mutant(
         "held_one_sample",
         "events",
         "nivpjax/_held.py",
