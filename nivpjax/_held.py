@@ -115,6 +115,65 @@ def held_start(model, t0, h, y0, args):
     return jax.lax.cond(jnp.any(held), start, lambda y0: y0, y0)
 
 
+def phase_begins(model, t0, y0, t1, y1, args):
+    """Whether a selection row is held at the end of the step from `(t0, y0)` to
+    `(t1, y1)` and not at its start: a sliding mode or a stick begins inside the step (or
+    on its end)."""
+    h = jnp.where(t1 > t0, t1 - t0, 1.0)
+    _, sigma = _maps(model, h, args)
+    return jnp.any(~_held(model, sigma, t0, y0) & _held(model, sigma, t1, y1))
+
+
+def second_order_ends(model, t0, y0, t1, y1, args):
+    r"""`(y0, y1)` with each selection row that is held at both ends of the step from
+    `(t0, y0)` to `(t1, y1)` but that no first-order hidden constraint determines (see
+    `_linearisation`: a second-order sliding mode, super-twisting's $w$ with
+    $\nu' = -k_2 w$, $\sigma = \sigma' = 0$) replaced at each end by its second-order
+    equivalent control: one Newton step on $\ddot\sigma(w) = 0$, the surface's second
+    derivative along the flow with the selection held (`_second_order_newton`). The rates
+    an interpolant reads at the ends then follow the phase, not the stage: the trapezoidal
+    rule solves $w_1 = 2\bar w - w_0$ there, so its end values ring from step to step
+    (measured on super-twisting after its finite-time convergence, rtol 1e-5: $w$ off by
+    about 0.4 at the ends, the cubic through the end rates of $\nu$ 400 times further off
+    at `t_eval` than the steps). Other rows, and rows whose step is not held at both ends,
+    unchanged."""
+    h = jnp.where(t1 > t0, t1 - t0, 1.0)
+    _, sigma = _maps(model, h, args)
+    held = _held(model, sigma, t0, y0) & _held(model, sigma, t1, y1)
+    on, _, _ = _linearisation(model, sigma, held, t1, y1, args)
+    free = held & ~on
+
+    def ends(_):
+        e0 = _second_order_newton(model, sigma, free, t0, y0, args)
+        e1 = _second_order_newton(model, sigma, free, t1, y1, args)
+        return e0, e1
+
+    return jax.lax.cond(jnp.any(free), ends, lambda _: (y0, y1), None)
+
+
+def _second_order_newton(model, sigma, rows, t, y, args):
+    # One Newton step on the second derivative of sigma along the flow (selections held:
+    # their rate taken 0) over `rows`, from `y`; the result where finite, else `y`.
+    y = jax.lax.stop_gradient(y)
+    one = jnp.ones_like(t)
+
+    def rate(tt, yy):
+        return jnp.where(model.algebraic, 0.0, _rate(model, tt, yy, args))
+
+    def first(tt, yy):
+        return jax.jvp(sigma, (tt, yy), (one, rate(tt, yy)))[1]
+
+    def second(yy):
+        return jax.jvp(first, (t, yy), (one, rate(t, yy)))[1]
+
+    J = jax.jacfwd(second)(y)
+    pair = rows[:, None] & rows[None, :]
+    eye = jnp.eye(y.shape[0], dtype=y.dtype)
+    step = _linalg.solve_or_nan(jnp.where(pair, J, eye), jnp.where(rows, second(y), 0.0))
+    out = jnp.where(rows, y - step, y)
+    return jnp.where(jnp.all(jnp.isfinite(out)), out, y)
+
+
 def _maps(model, h, args):
     # The projection of a state onto the sets, and the rows of y - P(y - rho R) of the
     # instantaneous residual R (-f on algebraic rows, 0 on differential ones), with the

@@ -410,3 +410,40 @@ def test_arrest_error_is_the_slip_velocity_left_at_the_end():
     for v0, v1 in ((1.0, 0.4), (0.0, 0.0)):
         arrested, error = arrest(0.3, v1, v0)
         assert not arrested.any() and not error.any(), (v0, v1)
+
+
+# A rate with a square-root singularity just past the step, y' = sqrt(B - t) (the
+# super-twisting term k1 sqrt|sigma| while sigma runs into 0): its Taylor series converges
+# only within B - t, and a step of half that is ordinary for a controller approaching the
+# crossing. The trapezoidal rule's error is its quadrature error there, in closed form.
+# Its estimate h^2/12 (F1' - F0') tracks it; the defect term (1 - theta) h D, O(h^4) on a
+# smooth piece, is there for jumps of the rate: added to it, it cancelled the estimate to
+# 0.4 of the error at h = 0.58 (B - t0) (a super-twisting run at rtol 1e-4 accepted a step
+# 4.7 times its tolerance before the first crossing, 14 times its estimate).
+B = 1.0
+
+
+def _sqrt_rate(t, y, args):
+    return jnp.sqrt(B - t) * jnp.ones_like(y)
+
+
+SQRT_MODEL = Model(
+    vector_field=_sqrt_rate,
+    projector=nj.Identity(),
+    mass_matrix=None,
+    algebraic=jnp.zeros(1, bool),
+)
+
+
+@pytest.mark.parametrize("name", ["tr", "theta0.7"])
+def test_theta_estimate_near_a_square_root_singularity(name):
+    stepper = CASES[name][0]
+    theta = stepper.theta
+    step = jax.jit(lambda t0, h: stepper.step(SQRT_MODEL, t0, h, jnp.zeros(1), None))
+    for reach, fraction in ((0.121, 0.58), (0.2, 0.4), (0.1, 0.3)):
+        t0, h = B - reach, fraction * reach
+        out = step(jnp.asarray(t0), jnp.asarray(h))
+        exact = 2 / 3 * (reach**1.5 - (reach - h) ** 1.5)
+        true = float(out.y1[0]) - exact
+        ratio = float(out.y_error[0]) / true
+        assert 0.75 <= ratio <= 1.5, (name, theta, reach, fraction, ratio)

@@ -37,8 +37,8 @@ def theta_error(model, theta, t0, h, y0, y1, f0, f1, reaction, args):
     differences of the effective rates $F = f + r$):
 
     $$ e = (\theta - \tfrac12)\,h\,(f_1 - f_0)
-           + \tfrac{h^2}{12}\,[\theta = \tfrac12]\,(\dot F_1 - \dot F_0)
-           + (1 - \theta)\,h\,D, \quad D = f_1 - f_0 - \tfrac h2 (\dot F_0 + \dot F_1), $$
+           + \tfrac{h^2}{12}\,[\theta = \tfrac12]\,(\dot F_1 - \dot F_0), \quad
+       D = f_1 - f_0 - \tfrac h2 (\dot F_0 + \dot F_1), $$
 
     where $\dot F = \partial_t f + J y'$, the multipliers' rates included (see
     `state_rate`). Like every estimate here, $e$ is the computed state minus the exact
@@ -47,7 +47,12 @@ def theta_error(model, theta, t0, h, y0, y1, f0, f1, reaction, args):
     the step that the smooth flow does not explain: $O(h^3)$ on a smooth piece, the jump
     of the rate when a selection changes face inside the step. A scheme that averages the
     end rates ($\theta < 1$) then makes an error of up to $(1 - \theta)\,h\,|D|$, which
-    the last term charges. Backward Euler collocates the selection at the step's end; its
+    replaces $e$ per component where it is the larger. It is not added: on a smooth piece
+    it is $-\tfrac{h^4}{24} y''''$ (for $\theta = \frac12$), a higher-order term of either
+    sign, and where the step is not small against the distance to a singularity of the
+    rate (a square root running into 0, super-twisting's $\sqrt{|\sigma|}$) it cancelled
+    the leading term: 0.4 of the error at half that distance, a step accepted at 4.7
+    times its tolerance. Backward Euler collocates the selection at the step's end; its
     first term already sees the jump through the multipliers in $f$.
     """
     if theta == 1.0:
@@ -59,8 +64,8 @@ def theta_error(model, theta, t0, h, y0, y1, f0, f1, reaction, args):
     F1, r1, df1 = _effective(model, t1, h, y1, f1, reaction, y0, y1, switched, args)
     if theta == 0.5:
         e = e + h**2 / 12 * (df1 - df0)
-    defect = F1 - F0 - 0.5 * h * (df0 + df1)
-    e = e + (1 - theta) * h * defect
+    defect = (1 - theta) * h * (F1 - F0 - 0.5 * h * (df0 + df1))
+    e = jnp.where(jnp.abs(defect) > jnp.abs(e), defect, e)
     kink = switch_kink_error(model, theta, t0, h, y0, y1, f0, f1, switched, args)
     return jnp.where(jnp.abs(kink) > jnp.abs(e), kink, e)
 
