@@ -130,21 +130,25 @@ def test_under_jit_and_vmap(stored):
     np.testing.assert_allclose(batched[0], jax.grad(_loss)(es[0]), rtol=1e-12, atol=0)
 
 
+class _Stop(Exception):
+    pass
+
+
 def test_vmap_keeps_equinox_checkpoints(monkeypatch):
     # Under vmap the stored rows would be allocated per member: the default is equinox's
     # own schedule there (31 checkpoints for max_steps=512), top level stores every step.
+    # Read off the solve's call to its program cache (argument 14), which is stopped there:
+    # nothing is compiled.
     seen = []
-    original = _loop.stores_every_step
 
-    def spy(state, max_steps, checkpoints):
-        seen.append(checkpoints)
-        return original(state, max_steps, checkpoints)
+    def spy(*args):
+        seen.append(args[14])
+        raise _Stop
 
-    monkeypatch.setattr(_loop, "stores_every_step", spy)
-    _solve_jit.cache_clear()
-    jax.vmap(jax.grad(_final))(jnp.array([0.85, 0.8]))
-    assert seen and set(seen) == {31}
-    seen.clear()
-    jax.grad(_final)(E)
-    assert seen and set(seen) == {None}
-    _solve_jit.cache_clear()
+    monkeypatch.setattr(_solve_jit, "prepare", spy)
+    for fn in (jax.vmap(jax.grad(_final)), jax.jit(jax.vmap(jax.grad(_final)))):
+        with pytest.raises(_Stop):
+            fn(jnp.array([0.85, 0.8]))
+    with pytest.raises(_Stop):
+        jax.grad(_final)(E)
+    assert seen == [31, 31, None]
