@@ -104,6 +104,13 @@ def run(task, controller, x0, args, slip_ref, h0=None):
             seconds = min(seconds, time.perf_counter() - start)
         err = abs(float(slip) / float(slip_ref[i]) - 1.0) if ok else float("nan")
         rows.append((int(acc), int(rej), int(its), bool(ok), err, seconds))
+    return _summary(rows)
+
+
+def _summary(rows):
+    """Means of the counts and seconds over the draws, the failures, and the largest and
+    mean errors of the successful ones; `rows`: `(accepted, rejected, iterations, ok,
+    error, seconds)` per draw."""
     a = np.array(rows, dtype=float)
     ok = a[:, 3] > 0
     errs = a[ok, 4]
@@ -293,19 +300,10 @@ def sac_rows(size, n_draws, steps, slip_ref, episode=2000):
                 seconds,
             )
         )
-    a = np.array(rows, dtype=float)
-    ok = a[:, 3] > 0
-    errs = a[ok, 4]
     row = dict(
         controller=f"SAC (rejax; the study's env, {steps} steps at 2 x 2)",
         rtol=float("nan"),
-        accepted=float(a[:, 0].mean()),
-        rejected=float(a[:, 1].mean()),
-        iterations=float(a[:, 2].mean()),
-        failures=int((~ok).sum()),
-        error=float(errs.max()) if errs.size else float("nan"),
-        error_mean=float(errs.mean()) if errs.size else float("nan"),
-        seconds=float(a[:, 5].mean()),
+        **_summary(rows),
         training_seconds=train_seconds,
         curve=curve,
     )

@@ -29,10 +29,10 @@ from typing import Any
 
 import equinox as eqx
 import jax
-import jax.numpy as jnp
 import numpy as np
 
 from ._compiler import call_top_level, compiler_options
+from ._stored_loop import instantiate_zero, is_symbolic_zero
 
 
 _HOIST_ERRORS = (
@@ -232,19 +232,6 @@ def _any_tracer(tree) -> bool:
     return any(isinstance(x, jax.core.Tracer) for x in jax.tree.leaves(tree))
 
 
-def _is_symbolic_zero(x) -> bool:
-    return isinstance(x, jax.custom_derivatives.SymbolicZero)
-
-
-def _instantiate(x):
-    # A symbolic zero cotangent as an array (float0 for integer outputs).
-    if _is_symbolic_zero(x):
-        if x.aval.dtype == jax.dtypes.float0:
-            return np.zeros(x.aval.shape, x.aval.dtype)
-        return jnp.zeros(x.aval.shape, x.aval.dtype)
-    return x
-
-
 def _aval_key(x):
     if isinstance(x, (float, complex)):
         return type(x)
@@ -315,11 +302,7 @@ class CachedJit:
         except _HOIST_ERRORS:
             if call.key[0] != "hoisted":
                 raise
-            with self._lock:
-                self._programs.pop(call.key, None)
-                self._static_only.add(call.key)
-                self._counts["fallbacks"] += 1
-            return self.prepare_static(call)()
+            return self._static_after_failure(call)()
         if call.signature is not None:
             self._seen.add(call.signature)
         return out
@@ -344,11 +327,16 @@ class CachedJit:
         except _HOIST_ERRORS:
             if call.key[0] != "hoisted":
                 raise
-            with self._lock:
-                self._programs.pop(call.key, None)
-                self._static_only.add(call.key)
-                self._counts["fallbacks"] += 1
-            return self.prepare_static(call).with_vjp()
+            return self._static_after_failure(call).with_vjp()
+
+    def _static_after_failure(self, call: PreparedCall) -> PreparedCall:
+        # A hoisted program that failed to trace: forget it, remember its key as static
+        # only, and prepare the call with its closed-over values as constants.
+        with self._lock:
+            self._programs.pop(call.key, None)
+            self._static_only.add(call.key)
+            self._counts["fallbacks"] += 1
+        return self.prepare_static(call)
 
     def _run_vjp(self, call: PreparedCall):
         key = call.key
@@ -366,7 +354,7 @@ class CachedJit:
             return call_top_level(program, nested, dynamic)
 
         def run_bwd(vjp_fn, cotangent):
-            cotangent = jax.tree.map(_instantiate, cotangent, is_leaf=_is_symbolic_zero)
+            cotangent = jax.tree.map(instantiate_zero, cotangent, is_leaf=is_symbolic_zero)
             nested = _any_tracer((vjp_fn, cotangent))
             grads = iter(call_top_level(self._apply_vjp, nested, vjp_fn, cotangent))
             return tuple(next(grads) if p else None for p in box["perturbed"])

@@ -109,7 +109,7 @@ def stored_while_loop(cond, step, state, buffers: dict, max_steps: int):
         k, stored, consts = res
         lin = box["lin"]
         lin.consts = consts  # this trace's values, not the forward pass's
-        ct = jax.tree.map(_instantiate, ct, is_leaf=_is_symbolic_zero)
+        ct = jax.tree.map(instantiate_zero, ct, is_leaf=is_symbolic_zero)
         ct_state, ct_buffers = ct
         ct_state0, ct_buffers0, ct_consts = _reverse(lin, k, stored, ct_state, ct_buffers)
         return ct_state0, ct_buffers0, ct_consts, [None] * len(cond_consts)
@@ -118,13 +118,14 @@ def stored_while_loop(cond, step, state, buffers: dict, max_steps: int):
     return loop(state, buffers, step_consts, cond_consts)
 
 
-def _is_symbolic_zero(x) -> bool:
+def is_symbolic_zero(x) -> bool:
     return isinstance(x, jax.custom_derivatives.SymbolicZero)
 
 
-def _instantiate(x):
-    # A symbolic zero cotangent as an array (float0 for integer leaves).
-    if _is_symbolic_zero(x):
+def instantiate_zero(x):
+    """A symbolic zero cotangent as an array (float0 for integer leaves); other leaves as
+    they are. Also used by the solve boundary's VJP (`nivpjax._cache`)."""
+    if is_symbolic_zero(x):
         if x.aval.dtype == jax.dtypes.float0:
             return np.zeros(x.aval.shape, x.aval.dtype)
         return jnp.zeros(x.aval.shape, x.aval.dtype)
