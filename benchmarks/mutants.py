@@ -1021,7 +1021,7 @@ MUTANTS = [
         "come_to_rest_skipped",
         "events",
         "nivpjax/_loop.py",
-        "return jnp.where(rest, _stuck(y0, y1, r0, da0, h, w), y)",
+        "return _stopped_inside(model, t0, y0, y1, moving, r1, r1, rows, t1 - t0, w, y, args)",
         "return y",
         "_come_to_rest's comment: a row at rest at the end of a step in which a phase begins "
         "follows the flow up to its stop, not a cubic bent to arrive with zero rate",
@@ -1031,11 +1031,14 @@ MUTANTS = [
         "come_to_rest_curvature_sign",
         "events",
         "nivpjax/_loop.py",
-        "return jnp.where(rest, _stuck(y0, y1, r0, da0, h, w), y)",
-        "return jnp.where(rest, _stuck(y0, y1, r0, -da0, h, w), y)",
-        "_come_to_rest's comment: the flow from the start to second order (a block's "
-        "position under its constant deceleration)",
-        ("tests/test_twisting.py::test_t_eval_across_a_stop_inside_a_step",),
+        "da0 = h * _rate_change(model, t0, y0, p0, args)",
+        "da0 = -h * _rate_change(model, t0, y0, p0, args)",
+        "_stopped_inside's users: the flow from the start to second order up to a stop (a "
+        "block's position under its constant deceleration; a ball sticking on its wall)",
+        (
+            "tests/test_twisting.py::test_t_eval_across_a_stop_inside_a_step",
+            TBF + "test_t_eval_as_accurate_as_the_steps[bathe]",
+        ),
     ),
     Mutant(
         "held_one_sample",

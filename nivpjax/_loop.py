@@ -590,10 +590,7 @@ def _in_step(model: Model, t, w, t0, y0, t1, y1, args, stepper=None):
     y = jnp.where(sets & held0 & ~held1, _left(y0, y1, r0, r1, h * a1, h, w), y)
     if model.has_weighed:
         # Held: zero rate up to the round-off of the law's reaction cancelling f.
-        small = jnp.sqrt(jnp.finfo(y0.dtype).eps) * (jnp.abs(p0) + jnp.abs(r1))
-        stuck = model.weighed & (jnp.abs(p0) > small) & (jnp.abs(p1) <= small)
-        da0 = h * _rate_change(model, t0, y0, p0, args)
-        y = jnp.where(stuck, _stuck(y0, y1, p0, da0, h, w), y)
+        y = _stopped_inside(model, t0, y0, y1, p0, p1, r1, model.weighed, h, w, y, args)
     if model.has_selections:
         free = ~sets & ~model.weighed  # rows the cases above leave to the cubic
         y = _come_to_rest(model, t0, y0, t1, y1, r0, r1, y, w, args, free)
@@ -610,12 +607,20 @@ def _come_to_rest(model: Model, t0, y0, t1, y1, r0, r1, y, w, args, rows):
     # it (`_stuck`), instead of a cubic bent to arrive there with zero rate over the whole
     # step (measured: the trapezoidal rule's block on a plane, 129 times further off at
     # `t_eval` than the steps, still moving after its stop).
-    h = t1 - t0
-    small = jnp.sqrt(jnp.finfo(y0.dtype).eps) * (jnp.abs(r0) + jnp.abs(r1))
-    rest = rows & ~model.algebraic & (jnp.abs(r0) > small) & (jnp.abs(r1) <= small)
-    rest = rest & phase_begins(model, t0, y0, t1, y1, args)
-    da0 = h * _rate_change(model, t0, y0, jnp.where(model.algebraic, 0.0, r0), args)
-    return jnp.where(rest, _stuck(y0, y1, r0, da0, h, w), y)
+    rows = rows & ~model.algebraic & phase_begins(model, t0, y0, t1, y1, args)
+    moving = jnp.where(model.algebraic, 0.0, r0)
+    return _stopped_inside(model, t0, y0, y1, moving, r1, r1, rows, t1 - t0, w, y, args)
+
+
+def _stopped_inside(model: Model, t0, y0, y1, p0, p1, scale, rows, h, w, y, args):
+    # `_stuck` on the rows among `rows` moving at the start (rate `p0`) and at rest at the
+    # end (`p1` zero up to round-off relative to |p0| + |scale|); `y` elsewhere. Serves
+    # friction rows held at the end, persistent contacts' rows and rows a phase that
+    # begins inside the step brings to rest.
+    small = jnp.sqrt(jnp.finfo(y0.dtype).eps) * (jnp.abs(p0) + jnp.abs(scale))
+    stopped = rows & (jnp.abs(p0) > small) & (jnp.abs(p1) <= small)
+    da0 = h * _rate_change(model, t0, y0, p0, args)
+    return jnp.where(stopped, _stuck(y0, y1, p0, da0, h, w), y)
 
 
 def _selections(model: Model, t, t0, y0, t1, y1, y, args):
@@ -664,10 +669,7 @@ def _persistent(model: Model, t0, y0, f0, t1, y1, f1, h, w, args, y):
     p0, p1 = model.to_state(f0 + law0), model.to_state(f1 + law1)
     rows = model.weighed & (law0 != 0) & (law1 != 0)
     y = jnp.where(rows, cubic_hermite(y0, y1, h * p0, h * p1, w), y)
-    small = jnp.sqrt(jnp.finfo(y0.dtype).eps) * (jnp.abs(p0) + jnp.abs(model.to_state(f1)))
-    stuck = rows & (jnp.abs(p0) > small) & (jnp.abs(p1) <= small)
-    da0 = h * _rate_change(model, t0, y0, p0, args)
-    return jnp.where(stuck, _stuck(y0, y1, p0, da0, h, w), y)
+    return _stopped_inside(model, t0, y0, y1, p0, p1, model.to_state(f1), rows, h, w, y, args)
 
 
 def _rate_change(model: Model, t, y, rate, args):
