@@ -1,5 +1,7 @@
 """Semismooth Newton and the VI method on single implicit steps with exact solutions."""
 
+import re
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -379,6 +381,49 @@ def test_small_solve_flags_singular_systems_and_batches():
     xs, oks = jax.vmap(_SMALL_SOLVE)(As, bs)
     assert bool(jnp.all(oks))
     np.testing.assert_allclose(xs, np.linalg.solve(As, bs[..., None])[..., 0], rtol=1e-10)
+
+
+def _batched_case(rng, batch, n):
+    # Systems that need pivoting (zero leading entries), and one singular member (a zero
+    # row: an exactly zero pivot on either path).
+    A = rng.normal(size=(batch, n, n)) + 3.0 * np.eye(n)
+    A[:, 0, 0] = 0.0
+    A[-1, 1] = 0.0
+    return jnp.asarray(A), jnp.asarray(rng.normal(size=(batch, n)))
+
+
+@pytest.mark.parametrize("loop_max", [64, 10])
+def test_batched_solves_emit_no_batched_lapack_call(monkeypatch, loop_max):
+    # jaxlib 0.10's batched CPU LAPACK factorisations deadlock two at a time on a two-core
+    # machine (`_linalg.LOOP_MAX`'s comment): under vmap every large solve is eliminated
+    # across the batch (12 <= LOOP_MAX) or one system at a time (12 > LOOP_MAX = 10),
+    # with the values and reverse-mode derivatives of LAPACK's, NaN for a singular member.
+    from nivpjax import _linalg
+
+    monkeypatch.setattr(_linalg, "LOOP_MAX", loop_max)
+    A, b = _batched_case(np.random.default_rng(loop_max), 3, 12)
+
+    def loss(A, b):
+        return jnp.sum(jnp.sin(_linalg.solve(A, b)[0]))
+
+    def batched(A, b):
+        xs, oks = jax.vmap(_linalg.solve)(A, b)
+        shared = jax.vmap(_linalg.solve_or_nan, in_axes=(None, 0))(A[0], b)
+        grads = jax.vmap(jax.grad(loss, (0, 1)))(A[:2], b[:2])
+        return xs, oks, shared, grads, jax.vmap(_linalg.inverse)(A[:2])
+
+    lowered = jax.jit(batched).lower(A, b).as_text()
+    factorisations = re.findall(r"lapack_\w+getrf_ffi[^\n]*: \(tensor<([0-9x]+)x\w+>", lowered)
+    assert factorisations and all(f.count("x") == 1 for f in factorisations), factorisations
+    xs, oks, shared, grads, inverses = jax.jit(batched)(A, b)
+    want = np.linalg.solve(A[:2], b[:2, :, None])[..., 0]
+    np.testing.assert_allclose(xs[:2], want, rtol=1e-10)
+    assert oks.tolist() == [True, True, False]
+    np.testing.assert_allclose(shared, np.linalg.solve(A[0], b.T).T, rtol=1e-10)
+    np.testing.assert_allclose(inverses, np.linalg.inv(A[:2]), rtol=1e-10, atol=1e-13)
+    lapack = jax.vmap(jax.grad(lambda A, b: jnp.sum(jnp.sin(jnp.linalg.solve(A, b))), (0, 1)))
+    for got, want in zip(grads, lapack(A[:2], b[:2])):
+        np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-11)
 
 
 def test_singular_newton_system_falls_back_to_the_projection_step():

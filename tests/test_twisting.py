@@ -54,13 +54,6 @@ def test_t_eval_as_right_as_the_steps(rows):
     assert np.all([r["outside"] == 0.0 for r in rows]), [r["outside"] for r in rows]
 
 
-@pytest.mark.skip(
-    reason="deadlocks about one run in two (0% CPU, every thread asleep, the main thread "
-    "waiting in XLA's CPU executable) on the second call of the compiled block_cone run: "
-    "found on the merged tree at the end of stop 39, cause not found (not the stored "
-    "loop, the solve's custom VJP or the one-scan start-up: each ruled out); see the "
-    "closing note"
-)
 @pytest.mark.parametrize("rtol", [1e-3, 1e-5])
 def test_t_eval_across_a_stop_inside_a_step(rtol):
     # The campaign's block on a plane with cone friction, trapezoidal rule: the block stops

@@ -10,6 +10,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array
 
+from .. import _linalg
+
 
 Apply = Callable[[Array], Array]
 
@@ -125,7 +127,7 @@ class BlockJacobi(AbstractPreconditioner):
             slot[:, None, None],
             np.arange(k)[None, :, None],
         ]  # (block, row, column)
-        inv = jnp.linalg.inv(B)
+        inv = jax.vmap(_linalg.inverse)(B)
         usable = jnp.all(jnp.isfinite(inv), axis=(1, 2), keepdims=True)
         inv = jnp.where(usable, inv, jnp.eye(k, dtype=dtype))
         idx = jnp.asarray(blocks)

@@ -6,6 +6,7 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
+from .. import _linalg
 from .base import AbstractProjector, ProjectionContext
 from .contact import UnilateralContact
 
@@ -57,7 +58,7 @@ class HeldGaps(AbstractProjector):
         Wt, B = self.contact._maps(ctx.t, y, ctx.args, z.dtype)
         m = gap.shape[0]
         D = jnp.where(held[:, None] & held[None, :], Wt @ B, jnp.eye(m, dtype=z.dtype))
-        mu = jnp.linalg.solve(D, -jnp.where(held, gap, 0.0))
+        mu = _linalg.solve_or_nan(D, -jnp.where(held, gap, 0.0))
         return z + B @ jnp.where(held, mu, 0.0)
 
     def acts_on(self, n: int) -> np.ndarray:

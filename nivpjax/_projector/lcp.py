@@ -4,13 +4,15 @@ import jax
 import jax.numpy as jnp
 from jax import lax
 
+from .. import _linalg
+
 
 def _active_solve(D, rhs, S):
     # Solve D_SS x_S = rhs_S, x = 0 off S, as one dense system of the full size.
     m = D.shape[0]
     both = S[:, None] & S[None, :]
     M = jnp.where(both, D, jnp.eye(m, dtype=D.dtype))
-    return jnp.linalg.solve(M, jnp.where(S, rhs, 0.0))
+    return _linalg.solve_or_nan(M, jnp.where(S, rhs, 0.0))
 
 
 def _lcp_residual(D, q, p):
