@@ -20,7 +20,8 @@ Beside the error, per run:
 The reference assumes sliding lasts from $T^*$ on; it does at every point here (the
 equivalent selection $(d' + c^3 x_1)/k_2$ stays at most 0.96 in modulus).
 
-Writes `benchmarks/results/super_twisting_scan.md`.
+Writes `benchmarks/results/super_twisting_scan.md` (`--out`; the trapezoidal rule and
+Bathe's run is `results/super_twisting_scan_second_order.md`).
 """
 
 import argparse
