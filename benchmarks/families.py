@@ -330,7 +330,9 @@ CHUA = Family(
 
 
 def _st_make(p):
-    return nj.scenes.super_twisting(c=p["c"], lipschitz=p["L"])
+    # `x0` = (x1, x2) optional (tests/test_reliability.py runs the family beyond its grid).
+    x0 = p.get("x0", (0.5, 0.0))
+    return nj.scenes.super_twisting(c=p["c"], lipschitz=p["L"], x0=x0)
 
 
 def _st_error(p, ts, xs):

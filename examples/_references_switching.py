@@ -137,8 +137,9 @@ def st_disturbance(t):
     return 0.3 * np.sin(5.0 * t), 1.5 * np.cos(5.0 * t)
 
 
-def super_twisting_reference(x0, k1, k2, c, t_eval):
-    """The exact super-twisting trajectory at the times `t_eval` (sorted).
+def super_twisting_reference(x0, k1, k2, c, t_eval, t0=0.0):
+    """The exact super-twisting trajectory from `x0` at `t0` at the times `t_eval` (sorted,
+    none before `t0`).
 
     Reaching phase: $w = \\operatorname{sign}\\sigma$ is constant between the zero crossings
     of $\\sigma = x_2 + c x_1$ (they are transversal: $\\sigma' = \\nu + d + c x_2$ is
@@ -161,8 +162,11 @@ def super_twisting_reference(x0, k1, k2, c, t_eval):
 
         return f
 
-    t, x = 0.0, np.asarray(x0, dtype=float)
-    w = np.sign(x[1] + c * x[0])
+    t, x = t0, np.asarray(x0, dtype=float)
+    # On the surface at t0 the sqrt term vanishes: sigma leaves it along its rate.
+    w = np.sign(x[1] + c * x[0]) or np.sign(x[2] + st_disturbance(t0)[0] + c * x[1])
+    if w == 0:
+        raise ValueError("x0 is the sliding state at t0: there is no reaching phase.")
     out = np.empty((t_eval.size, 3))
     crossings = []
     while True:

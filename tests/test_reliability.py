@@ -4,6 +4,8 @@ error within C rtol^q that falls as rtol does). The relay and spiral families ha
 grids in tests/test_filippov_trust.py; here each family runs its first grid point with one
 stepper (the steppers rotate over the families) and semismooth Newton."""
 
+import functools
+
 import pytest
 
 from benchmarks import reliability as campaign
@@ -23,10 +25,16 @@ SLICE = {
 RTOLS = (1e-4, 1e-5)
 
 
+@functools.cache
+def _compiled(name, stepper):
+    # One jitted run per (family, stepper), shared by the tests of this file.
+    return campaign.compiled_run(FAMILIES[name], stepper, "SSN", "default")
+
+
 def _judged(name):
     family = FAMILIES[name]
     stepper = SLICE[name]
-    scene, run = campaign.compiled_run(family, stepper, "SSN", "default")
+    scene, run = _compiled(name, stepper)
     rows = []
     for rtol in RTOLS:
         row = campaign.run_one(family, scene, run, family.grid[0], rtol)
@@ -58,6 +66,59 @@ def test_the_rule_flags_a_wrong_answer():
     assert verdicts == ["pass", "wrong", "stall", "wrong"]
     fine = [dict(ok=True, rtol=1e-3, error=1e-2), dict(ok=True, rtol=1e-4, error=1e-3)]
     assert [r["verdict"] for r in campaign.judge(family, 2, fine)] == ["pass", "pass"]
+
+
+def test_the_rule_reads_a_capped_coarse_error():
+    # Super-twisting, backward Euler's order (q = 1/2, 10^q / 2 = 1.58): the error near
+    # the Zeno point is about 2 k2 times the shift of the accumulation time, which falls
+    # like rtol^(1/2), but at loose tolerances it is capped by the last twisting's size.
+    # The decade out of the cap falls short once (1.44x, the campaign's EmbeddedBETR run
+    # at 1e-5), the next one proportionally (3.08x): not a wrong limit.
+    family = FAMILIES["super_twisting"]
+    rtols = (1e-3, 1e-4, 1e-5, 1e-6)
+
+    def verdicts(errors):
+        rows = [dict(ok=True, rtol=r, error=e) for r, e in zip(rtols, errors)]
+        return [r["verdict"] for r in campaign.judge(family, 1, rows)]
+
+    assert verdicts((3.15e-2, 1.01e-2, 7.0e-3, 2.27e-3)) == ["pass"] * 4
+    # An error that stops falling stays wrong in every decade it does not fall, ...
+    assert verdicts((3.15e-2, 1.01e-2, 7.0e-3, 6.0e-3)) == ["pass", "pass", "wrong", "wrong"]
+    # ... a short fall into the finest run has nothing after it to show the rate, ...
+    assert verdicts((3.15e-2, 1.0e-2, 3.1e-3, 2.5e-3)) == ["pass", "pass", "pass", "wrong"]
+    # ... and a fall after it must be the expected one (1.5x is not 1.58x), with the run
+    # after within its bound and successful.
+    assert verdicts((3.15e-2, 1.01e-2, 7.0e-3, 4.7e-3))[2] == "wrong"
+    failed = [dict(ok=True, rtol=r, error=e) for r, e in zip(rtols, (3.15e-2, 1.01e-2, 7e-3))]
+    failed.append(dict(ok=False, rtol=1e-6, error=float("nan")))
+    assert [r["verdict"] for r in campaign.judge(family, 1, failed)][2] == "wrong"
+
+
+# Super-twisting beyond the campaign's grid: gains (c, L) and initial states whose error
+# leaves the cap between rtol 1e-4 and 1e-5 (the first two) or 1e-3 and 1e-4 (the third).
+# The old rule flagged the pair at 1e-5 on the first (1.44x), backward Euler at 1e-5 on
+# the second (1.56x) and both at 1e-4 on the third; the other of each ran within 10%.
+TWISTING = (
+    {"c": 1.0, "L": 1.5, "x0": (0.5, 0.0)},
+    {"c": 1.0, "L": 1.5, "x0": (1.0, -0.5)},
+    {"c": 3.0, "L": 3.0, "x0": (-0.3, 0.8)},
+)
+
+
+@pytest.mark.parametrize("stepper", ["BackwardEuler", "EmbeddedBETR"])
+def test_super_twisting_family_converges(stepper):
+    family = FAMILIES["super_twisting"]
+    scene, run = _compiled("super_twisting", stepper)
+    for point in TWISTING:
+        rows = []
+        for rtol in (1e-3, 1e-4, 1e-5, 1e-6):
+            row = campaign.run_one(family, scene, run, point, rtol)
+            row["rtol"] = rtol
+            rows.append(row)
+        judged = campaign.judge(family, 1, rows)
+        assert all(r["verdict"] == "pass" for r in judged), [
+            (point, r["rtol"], r["verdict"], r["error"], r["ratio"]) for r in judged
+        ]
 
 
 @pytest.mark.parametrize("stepper", ["Trapezoidal", "Bathe"])
