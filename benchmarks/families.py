@@ -74,6 +74,14 @@ class Family:
     point_errors: object  # (params, ts, xs) -> the error at each of the times ts
     C: float
     h_max: float | None = None
+    rate: float | None = None  # the largest q the problem allows whatever the scheme
+
+    def q(self, order):
+        """The rule's rate for a stepper of the given order: `order / (order + 1)`, the
+        global error of a scheme of that order under control of its local error per
+        step, or the family's `rate` where the problem allows less whatever the scheme."""
+        q = order / (order + 1)
+        return q if self.rate is None else min(q, self.rate)
 
     def error(self, params, ts, xs):
         """The largest error over the times `ts` (sorted, as a run's accepted points)."""
@@ -354,6 +362,13 @@ SUPER_TWISTING = Family(
     5.0,
     _st_error,
     5.0,
+    # q = 1/2 whatever the scheme. The switchings accumulate at T*, and the time to reach
+    # the origin is homogeneous of degree 1 under the dilation (x1, x2, t) -> (l^2 x1,
+    # l x2, l t): an error e in x1 made near the origin moves T* by O(sqrt e), and
+    # nu = -k2 int w is off by up to 2 k2 |dT*| there. Errors at tolerance give
+    # O(rtol^(1/2)) (measured near T*: the trapezoidal rule and Bathe about rtol^0.45,
+    # benchmarks/results/super_twisting_scan_second_order.md).
+    rate=0.5,
 )
 
 

@@ -1514,8 +1514,7 @@ MUTANTS = [
         "nivpjax/_linalg.py",
         "return jnp.moveaxis(X.reshape(n, axis_size, m), 1, 0), True",
         "return X.reshape(axis_size, n, m), True",
-        "_lapack_batched: a shared matrix's batch of right-hand sides folded into columns "
-        "and back",
+        "_lapack_batched: a shared matrix's batch of right-hand sides folded into columns and back",
         (TN + "test_batched_solves_emit_no_batched_lapack_call",),
     ),
     Mutant(

@@ -13,7 +13,9 @@ controller options} x rtol from 1e-2 to 1e-8 (atol = rtol / 100).
 
     error <= C_family * rtol^q,   q = p / (p + 1) for a scheme of order p,
 
-(the global error of a scheme of order p under control of its local error per step), and
+(the global error of a scheme of order p under control of its local error per step; less
+where the family's problem allows less whatever the scheme: `Family.rate`, 1/2 on
+super-twisting, whose accumulation time moves like the square root of an error), and
 its error falls as rtol does: each time rtol falls by 10 the error falls by at least
 10^q / 2 (the expected rate within 2x), unless it is already below a tenth of its bound
 (round-off and the event margin set floors there, far inside tolerance), or the fall is
@@ -87,10 +89,6 @@ def controller(name, rtol, h_max):
 
 
 CONTROLS = ("default", "PI", "reference")
-
-
-def q_of(order):
-    return order / (order + 1)
 
 
 # Output times per run (`t_eval`), evenly spread over the horizon.
@@ -208,7 +206,7 @@ def run_one(family, scene, run, params, rtol):
 def judge(family, order, rows):
     """Classify the runs of one (configuration, grid point) across rtol, in place:
     `verdict` is `pass`, `stall` or `wrong` (with `why`)."""
-    q, C = q_of(order), family.constant(order)
+    q, C = family.q(order), family.constant(order)
     for row in rows:
         bound = C * row["rtol"] ** q
         row["ratio"] = row["error"] / bound if row["ok"] else np.nan
@@ -359,7 +357,7 @@ def summary(rows, families):
             steps = int(np.median([r["accepted"] for r in sel]))
             lines.append(
                 f"| {family.name} | {family.effect} | {family.constant(order):g} | {stepper} "
-                f"| {q_of(order):.2f} | {len(sel)} | {count['pass']} | {count['stall']} "
+                f"| {family.q(order):.2f} | {len(sel)} | {count['pass']} | {count['stall']} "
                 f"| {count['wrong']} | {worst} | {steps} | {_worst(sel, 'teval_ratio', '.2f')} "
                 f"| {_worst(sel, 'outside', '.1e')} |"
             )
@@ -416,7 +414,7 @@ def plot(rows, families, path):
             ax.loglog(rt, worst, "o-", ms=3, label=stepper)
         rt = np.array(sorted({r["rtol"] for r in rows}))
         for order, style in ((1, ":"), (2, "--")):
-            ax.loglog(rt, family.constant(order) * rt ** q_of(order), "k" + style, lw=0.8)
+            ax.loglog(rt, family.constant(order) * rt ** family.q(order), "k" + style, lw=0.8)
         ax.set_title(family.name, fontsize=9)
         ax.set_xlabel("rtol")
         ax.invert_xaxis()
