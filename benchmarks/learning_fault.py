@@ -212,25 +212,6 @@ def size_rows(size, n_draws, iterations, train_size):
     return result
 
 
-def _returns(env, act, keys, episode):
-    """Deterministic returns of `act` on the gymnax-wrapped `env`, one episode per key."""
-    params = env.default_params
-
-    def one(key):
-        obs, state = env.reset(key, params)
-
-        def body(carry, k):
-            obs, state, total, alive = carry
-            obs, state, r, d, _ = env.env.step(k, state, act(obs, k), params.inner)
-            return (obs, state, total + jnp.where(alive, r, 0.0), alive & ~d), None
-
-        init = (obs, state, jnp.zeros(()), jnp.ones((), bool))
-        (_, _, total, _), _ = jax.lax.scan(body, init, jr.split(key, episode))
-        return total
-
-    return jax.vmap(one)(keys)
-
-
 def train_sac(steps, seed=0, episode=40):
     """rejax SAC on the study's environment at 2 x 2 cells: its deterministic act, the
     training time, and the learning curve (mean deterministic return on 4 fixed draws)."""
@@ -250,7 +231,7 @@ def train_sac(steps, seed=0, episode=40):
         learning_rate=1e-3,
     )
     algo = algo.replace(
-        eval_callback=lambda algo, ts, rng: _returns(env, algo.make_act(ts), keys, episode)
+        eval_callback=lambda algo, ts, rng: env.returns(algo.make_act(ts), keys, episode)
     )
     start = time.perf_counter()
     ts, curve = jax.block_until_ready(jax.jit(algo.train)(jr.PRNGKey(seed)))

@@ -9,7 +9,9 @@ only gymnasium."""
 from typing import Any
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
+import jax.random as jr
 from gymnax.environments import environment, spaces
 
 from ..learn import FaultEnv, StepSizeEnv
@@ -73,6 +75,28 @@ class GymnaxEnv(environment.Environment):
 
     def is_terminal(self, state, params=None):
         return state.done
+
+    def returns(self, act, keys, episode=None, params=None):
+        """The return of `act(obs, key) -> action` in one episode per key of `keys` (a
+        batch of PRNG keys): the rewards summed from a reset up to the end of the wrapped
+        environment's episode (no automatic reset), over at most `episode` steps (default
+        `max_steps_in_episode`). Jittable, e.g. as rejax's `eval_callback`."""
+        params = self.default_params if params is None else params
+        episode = params.max_steps_in_episode if episode is None else int(episode)
+
+        def one(key):
+            obs, state = self.reset(key, params)
+
+            def body(carry, k):
+                obs, state, total, alive = carry
+                obs, state, r, d, _ = self.env.step(k, state, act(obs, k), params.inner)
+                return (obs, state, total + jnp.where(alive, r, 0.0), alive & ~d), None
+
+            init = (obs, state, jnp.zeros(()), jnp.ones((), bool))
+            (_, _, total, _), _ = jax.lax.scan(body, init, jr.split(key, episode))
+            return total
+
+        return jax.vmap(one)(keys)
 
     @property
     def name(self) -> str:
