@@ -1514,8 +1514,7 @@ MUTANTS = [
         "nivpjax/_linalg.py",
         "return jnp.moveaxis(X.reshape(n, axis_size, m), 1, 0), True",
         "return X.reshape(axis_size, n, m), True",
-        "_lapack_batched: a shared matrix's batch of right-hand sides folded into columns "
-        "and back",
+        "_lapack_batched: a shared matrix's batch of right-hand sides folded into columns and back",
         (TN + "test_batched_solves_emit_no_batched_lapack_call",),
     ),
     Mutant(
@@ -1567,6 +1566,29 @@ MUTANTS = [
         "stop = jnp.full_like(s0, jnp.inf)",
         "FrictionalContact.next_event: the stop predicted along the tangential speed's secant",
         (TBF + "test_slide_to_stick[bathe]", TBF + "test_slide_to_stick[tr]"),
+    ),
+    Mutant(
+        "flat_frictional_contact_not_weighed",
+        "projectors",
+        P + "contact_friction.py",
+        "        return np.ones(n, bool)\n",
+        "        return self.contact.weighed_rows(n)\n",
+        "FrictionalContact: its rows weighed on a flat gap too (the friction force turns with "
+        "a velocity thrown across a slope: order 1 applied at the stage's end)",
+        (
+            "tests/test_flat_friction.py::test_order_at_fixed_steps[tr]",
+            "tests/test_flat_friction.py::test_as_accurate_as_the_law_written_into_f[tr]",
+        ),
+    ),
+    Mutant(
+        "law_reaction_point_rounds_away",
+        "projectors",
+        "nivpjax/_model.py",
+        "s = self._jvp_point(h, y, jnp.where(self.weighed, f, 0.0))",
+        "s = 1e-6 * jnp.where(h > 0, h, 1.0)",
+        "Model.law_reaction: its JVP's point moved off y where y + s f would round to y "
+        "(float32: a resting contact read as open, the friction force lost at the start)",
+        ("tests/test_flat_friction.py::test_float32_slide_up_a_slope",),
     ),
     Mutant(
         "persistent_teval_linear",

@@ -1,6 +1,7 @@
 """Coulomb friction on a unilateral contact whose normal turns (a curved wall)."""
 
 import jax.numpy as jnp
+import numpy as np
 
 from .ball import _safe_norm, project_ball
 from .base import AbstractProjector, Bound, ProjectionContext, resolve
@@ -25,10 +26,12 @@ class FrictionalContact(AbstractProjector):
     the step (Moreau–Jean, De Saxcé's bipotential).
 
     Everything the contact decides (active set, impacts, events, the persistent contacts
-    of its law) is the contact's. Its reaction rows are weighed when the contact's are
-    (a curved gap): the friction force of a persistent contact, $-\mu N\,v_t/|v_t|$ in
-    slip and the holding force in stick, then enters the trapezoidal stages at both ends
-    like the vector field (see `Model.law_reaction`).
+    of its law) is the contact's. Its reaction rows are weighed, on a flat gap as on a
+    curved one: the friction force of a persistent contact, $-\mu N\,v_t/|v_t|$ in slip
+    and the holding force in stick, enters the trapezoidal stages at both ends like the
+    vector field (see `Model.law_reaction`). Applied whole at the stage's end instead, a
+    friction force that turns with the sliding velocity (a block thrown across a slope)
+    is integrated at first order.
 
     Events: a tangential velocity that passes through zero between the two ends of a
     step (a stick or a reversal; its smaller speed, in velocity units, is reported as a
@@ -120,4 +123,6 @@ class FrictionalContact(AbstractProjector):
         return self.contact.acts_on(n)
 
     def weighed_rows(self, n: int):
-        return self.contact.weighed_rows(n)
+        """Every row, whether the contact's are weighed (a curved gap) or not (a flat one:
+        its friction force still turns with the sliding velocity)."""
+        return np.ones(n, bool)
