@@ -296,9 +296,9 @@ class Model(eqx.Module):
     def law_reaction(self, t, h, y, f, args):
         """The reaction (units of $f$) of the weighed rows' law at `(t, y)` under the
         smooth rate `f`, zero on other rows; `h` only sets the JVP's point $10^{-6} h$
-        (see `_weighed_start`), or more where $y + s f$ would round to $y$ (float32; see
-        `projected_rate`)."""
-        s = self._jvp_point(h, y, jnp.where(self.weighed, f, 0.0))
+        (see `_weighed_start`), or more where $y + s f$ would round to $y$ (float32: a
+        resting contact then reads as open; see `projected_rate`)."""
+        s = self._jvp_point(h, y, f)
         return jnp.where(self.weighed, self._prox_rate(t, s, y, f, args) - f, 0.0)
 
     def _prox_rate(self, t, s, y, f, args):
