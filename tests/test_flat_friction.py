@@ -221,3 +221,46 @@ def test_float32_slide_up_a_slope():
     ts, ys = np.asarray(sol.ts[: k + 1], float), np.asarray(sol.ys[: k + 1], float)
     assert k < 50, k
     assert np.max(np.abs(ys - _exact("incline_stick", ts)[0])) < 1e-5
+
+
+def _two_blocks():
+    # Two blocks on two planes, one frictional contact each (disjoint states, each block's
+    # own mu and angle): x = (q_a, q_b, v_a, v_b).
+    def dynamics(t, x, a, m):
+        down = jnp.stack([0.0, 0.0, -a["g"]])
+        return jnp.concatenate([x[6:], down, down])
+
+    def contact(k):
+        def gap(t, x, a):
+            alpha = a["alpha"][k]
+            n = jnp.stack([-jnp.sin(alpha), 0.0, jnp.cos(alpha)])
+            return jnp.stack([jnp.dot(n, x[3 * k : 3 * k + 3])])
+
+        positions, velocities = np.arange(3) + 3 * k, np.arange(3) + 6 + 3 * k
+        mu = lambda t, x, a: a["mu"][k]  # noqa: E731
+        return nj.Contact(gap, positions, velocities, friction=mu, name=f"block{k}")
+
+    return nj.Scene(dynamics, 12, (contact(0), contact(1)))
+
+
+def test_two_blocks_each_on_its_plane():
+    # Two independent frictional contacts in one scene (the refusal is for several contacts
+    # in one `Contact`, which would share states): each block as it slides alone. Bathe,
+    # thrown across (one slides on, one stops), rtol 1e-5: each block's error below
+    # rtol^(2/3), its stop located.
+    cases = ("across", "across_stick")
+    x0s, argss = zip(*(_inputs(c) for c in cases))
+    x0 = jnp.concatenate([x0s[0][:3], x0s[1][:3], x0s[0][3:], x0s[1][3:]])
+    args = dict(argss[0], mu=jnp.stack([a["mu"] for a in argss]))
+    args["alpha"] = jnp.stack([a["alpha"] for a in argss])
+    controller = nj.PIDController(rtol=1e-5, atol=1e-7, h_min=1e-14)
+    sol = _two_blocks().solve(0.0, 1.5, x0, args, stepper=nj.Bathe(), controller=controller)
+    assert sol.result == nj.RESULTS.successful, sol.result
+    k = int(sol.n_accepted)
+    ts, ys = np.asarray(sol.ts[: k + 1]), np.asarray(sol.ys[: k + 1])
+    for b, case in enumerate(cases):
+        exact, t_stop = _exact(case, ts)
+        mine = ys[:, np.r_[3 * b : 3 * b + 3, 6 + 3 * b : 9 + 3 * b]]
+        assert np.max(np.abs(mine - exact)) < 1e-5 ** (2 / 3), (case, np.max(np.abs(mine - exact)))
+        if np.isfinite(t_stop):
+            assert abs(_stop_step(ts, mine) - t_stop) < 1e-4, (case, t_stop)
