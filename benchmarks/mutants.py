@@ -1584,7 +1584,7 @@ MUTANTS = [
         "law_reaction_point_rounds_away",
         "projectors",
         "nivpjax/_model.py",
-        "s = self._jvp_point(h, y, f)",
+        "s = jnp.maximum(1e-6, jnp.sqrt(jnp.finfo(y.dtype).eps)) * jnp.where(h > 0, h, 1.0)",
         "s = 1e-6 * jnp.where(h > 0, h, 1.0)",
         "Model.law_reaction: its JVP's point moved off y where y + s f would round to y "
         "(float32: a resting contact read as open, the friction force lost at the start)",

@@ -294,11 +294,14 @@ class Model(eqx.Module):
         return bool(self.projector.weighed_rows(self.algebraic.shape[0]).any())
 
     def law_reaction(self, t, h, y, f, args):
-        """The reaction (units of $f$) of the weighed rows' law at `(t, y)` under the
+        r"""The reaction (units of $f$) of the weighed rows' law at `(t, y)` under the
         smooth rate `f`, zero on other rows; `h` only sets the JVP's point $10^{-6} h$
-        (see `_weighed_start`), or more where $y + s f$ would round to $y$ (float32: a
-        resting contact then reads as open; see `projected_rate`)."""
-        s = self._jvp_point(h, y, f)
+        (see `_weighed_start`), or $\sqrt\varepsilon\,h$ where that is larger (float32:
+        $3.5 \cdot 10^{-4} h$; at $10^{-6} h$ the point rounds to $y$ and a resting
+        contact reads as open). Not from the rate's size, as `projected_rate`'s point: a
+        friction law whose velocity comes to rest has a kink within a point moved out
+        that far (the interval block's stop then stalled the trapezoidal rule)."""
+        s = jnp.maximum(1e-6, jnp.sqrt(jnp.finfo(y.dtype).eps)) * jnp.where(h > 0, h, 1.0)
         return jnp.where(self.weighed, self._prox_rate(t, s, y, f, args) - f, 0.0)
 
     def _prox_rate(self, t, s, y, f, args):
@@ -366,18 +369,11 @@ class Model(eqx.Module):
         # rows.
         rows = jnp.asarray(rows) & ~self.algebraic
         f_rows = jnp.where(rows, f, 0.0)
-        s = self._jvp_point(h, y, f_rows)
-        return jnp.where(rows, self._prox_rate(t, s, y, f_rows, args), f), rows
-
-    @staticmethod
-    def _jvp_point(h, y, f_rows):
-        # The point s of the one-sided JVPs at y: 1e-6 h, or more (up to 1e-2 h) where
-        # y + s f would round to y on the rows of `f_rows` (float32: a state at a face
-        # would then read as inside the set, free; a resting contact as open).
         finfo = jnp.finfo(y.dtype)
         speed = jnp.max(jnp.abs(f_rows)) / (1 + jnp.max(jnp.abs(y)))
         h = jnp.where(h > 0, h, 1.0)
-        return jnp.clip(64 * finfo.eps / jnp.maximum(speed, finfo.tiny), 1e-6 * h, 1e-2 * h)
+        s = jnp.clip(64 * finfo.eps / jnp.maximum(speed, finfo.tiny), 1e-6 * h, 1e-2 * h)
+        return jnp.where(rows, self._prox_rate(t, s, y, f_rows, args), f), rows
 
     def reaction_at(self, t, h, y, args):
         r"""The constraint reaction at the state `(t, y)` (units of $f$; a row of the
