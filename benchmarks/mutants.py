@@ -1581,6 +1581,16 @@ MUTANTS = [
         ),
     ),
     Mutant(
+        "friction_anisotropic_mass_accepted",
+        "projectors",
+        "nivpjax/_scene/contact.py",
+        "ok = ok and m[0, 0] > 0 and np.allclose(m, m[0, 0] * np.eye(m.shape[0]), rtol=0, atol=0)",
+        "ok = ok and m[0, 0] > 0",
+        "Contact(friction=): an anisotropic inverse mass refused (it couples the normal and "
+        "tangential impulses, which FrictionalContact solves apart)",
+        (TBF + "test_bad_friction_and_axes",),
+    ),
+    Mutant(
         "law_reaction_point_rounds_away",
         "projectors",
         "nivpjax/_model.py",

@@ -266,3 +266,23 @@ def test_two_blocks_each_on_its_plane():
         assert np.max(np.abs(mine - exact)) < 1e-5 ** (2 / 3), (case, np.max(np.abs(mine - exact)))
         if np.isfinite(t_stop):
             assert abs(_stop_step(ts, mine) - t_stop) < 1e-4, (case, t_stop)
+
+
+def test_isotropic_mass():
+    # M^-1 = I / 2 (a block of mass 2, forces per unit mass in f): the contact's impulse
+    # doubles and its velocity change does not, and friction is bounded by mu times the
+    # normal velocity change, so the block slides as the unit-mass one. Bathe, rtol 1e-5,
+    # thrown across a slope it stops on: its error below rtol^(2/3), its stop located.
+    # (Before: refused, "`friction` needs unit masses".)
+    contact = nj.Contact(
+        _gap, [0, 1, 2], [3, 4, 5], inverse_mass=0.5 * np.eye(3), friction=CONTACT.friction
+    )
+    controller = nj.PIDController(rtol=1e-5, atol=1e-7, h_min=1e-14)
+    scene = nj.Scene(_dynamics, 6, (contact,))
+    sol = scene.solve(0.0, 1.5, *_inputs("across_stick"), stepper=nj.Bathe(), controller=controller)
+    assert sol.result == nj.RESULTS.successful, sol.result
+    k = int(sol.n_accepted)
+    ts, ys = np.asarray(sol.ts[: k + 1]), np.asarray(sol.ys[: k + 1])
+    exact, t_stop = _exact("across_stick", ts)
+    assert np.max(np.abs(ys - exact)) < 1e-5 ** (2 / 3), np.max(np.abs(ys - exact))
+    assert abs(_stop_step(ts, ys) - t_stop) < 1e-4, t_stop

@@ -11,16 +11,16 @@ from .predict import secant_crossing
 
 class FrictionalContact(AbstractProjector):
     r"""One unilateral contact with Coulomb friction in its tangent plane, on the contact's
-    velocity rows (unit masses): the velocity-level contact
+    velocity rows (unit or isotropic masses, $B = c\,W$): the velocity-level contact
     [`nivpjax.UnilateralContact`][] (its normal impulse $p_n\,n$, $n = W/|W|$ the unit
     normal at the iterate), then friction on the tangential part
 
-    $$ P(z) = z^+ - \Pi_{\mu |p_n|}\big((I - n n^T) z^+\big), \qquad z^+ = z + W p, $$
+    $$ P(z) = z^+ - \Pi_{\mu |B p|}\big((I - n n^T) z^+\big), \qquad z^+ = z + B p, $$
 
     $\Pi_r$ the projection onto the ball of radius $r$ in the tangent plane
     ([`nivpjax.project_ball`][]): the friction impulse opposes the tangential velocity
     and is at most $\mu$ times the normal impulse (stick where the tangential velocity
-    it meets is inside that bound). With unit masses and one contact the normal and
+    it meets is inside that bound). With isotropic masses and one contact the normal and
     tangential problems decouple, so this is the exact solution of the impulse-level
     Coulomb law $|p_t| \le \mu p_n$ with $p_t$ opposing the tangential velocity after
     the step (Moreau–Jean, De Saxcé's bipotential).
@@ -47,7 +47,8 @@ class FrictionalContact(AbstractProjector):
 
     def _friction(self, z, out, ctx: ProjectionContext, y):
         # The tangential friction impulse taken off `out`, the contact's projection of z
-        # with normals at y; |out - z| is the normal impulse (one contact, unit masses).
+        # with normals at y; |out - z| is the normal impulse's velocity change (one contact,
+        # isotropic masses: the friction impulse's is bounded by mu times it).
         n = self._normal(ctx, y, z.dtype)
         mu = jnp.maximum(resolve(self.mu, ctx, z.dtype), 0.0).reshape(())
         tangential = out - n * jnp.dot(n, out)
