@@ -1569,6 +1569,39 @@ MUTANTS = [
         (TBF + "test_slide_to_stick[bathe]",),
     ),
     Mutant(
+        "flat_frictional_contact_not_weighed",
+        "projectors",
+        P + "contact_friction.py",
+        "        return np.ones(n, bool)\n",
+        "        return self.contact.weighed_rows(n)\n",
+        "FrictionalContact: its rows weighed on a flat gap too (the friction force turns with "
+        "a velocity thrown across a slope: order 1 applied at the stage's end)",
+        (
+            "tests/test_flat_friction.py::test_order_at_fixed_steps[tr]",
+            "tests/test_flat_friction.py::test_as_accurate_as_the_law_written_into_f[tr]",
+        ),
+    ),
+    Mutant(
+        "friction_anisotropic_mass_accepted",
+        "projectors",
+        "nivpjax/_scene/contact.py",
+        "ok = ok and m[0, 0] > 0 and np.allclose(m, m[0, 0] * np.eye(m.shape[0]), rtol=0, atol=0)",
+        "ok = ok and m[0, 0] > 0",
+        "Contact(friction=): an anisotropic inverse mass refused (it couples the normal and "
+        "tangential impulses, which FrictionalContact solves apart)",
+        (TBF + "test_bad_friction_and_axes",),
+    ),
+    Mutant(
+        "law_reaction_point_rounds_away",
+        "projectors",
+        "nivpjax/_model.py",
+        "s = jnp.maximum(1e-6, jnp.sqrt(jnp.finfo(y.dtype).eps)) * jnp.where(h > 0, h, 1.0)",
+        "s = 1e-6 * jnp.where(h > 0, h, 1.0)",
+        "Model.law_reaction: its JVP's point moved off y where y + s f would round to y "
+        "(float32: a resting contact read as open, the friction force lost at the start)",
+        ("tests/test_flat_friction.py::test_float32_slide_up_a_slope",),
+    ),
+    Mutant(
         "persistent_teval_linear",
         "interpolation",
         "nivpjax/_loop.py",

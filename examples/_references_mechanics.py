@@ -404,6 +404,62 @@ def ellipse_bowl_state(t, s0, sd0, a, b, g):
 
 
 # ----------------------------------------------------------------------------------------------
+# A block on an inclined plane of angle alpha (a flat contact), thrown in the plane with velocity
+# (u, w) along (up-slope, across), gravity g (1 + amp sin(omega t)) pressing it. Sliding, in the
+# speed and direction of its velocity (psi from up-slope):
+# sigma' = -g L (sin(alpha) cos(psi) + mu cos(alpha)), psi' = g L sin(alpha) sin(psi) / sigma,
+# L the load; at sigma = 0 it sticks for good where tan(alpha) <= mu, and slides down the fall
+# line from rest otherwise.
+
+
+def incline_slide_state(t, velocity, mu, alpha, g, amp=0.0, omega=0.0):
+    r"""`(q, v)` in world coordinates (6,) at the times `t` (array) of the block: the plane
+    through the origin with unit normal $(-\sin\alpha, 0, \cos\alpha)$, up-slope
+    $(\cos\alpha, 0, \sin\alpha)$, across $(0, 1, 0)$; and the time it stops (`inf` if it
+    does not before `t.max()`). DOP853 at rtol 1e-12, the stop located as an event."""
+    t = np.atleast_1d(np.asarray(t, float))
+    t_end = max(float(t.max()), 1e-12)
+    sa, ca = np.sin(alpha), np.cos(alpha)
+    load = lambda s: 1.0 + amp * np.sin(omega * s)  # noqa: E731
+
+    def rhs(s, z):
+        _, _, sigma, psi = z
+        a = g * load(s)
+        return [
+            sigma * np.cos(psi),
+            sigma * np.sin(psi),
+            -a * (sa * np.cos(psi) + mu * ca),
+            a * sa * np.sin(psi) / sigma,
+        ]
+
+    def stop(s, z):
+        return z[2]
+
+    stop.terminal, stop.direction = True, -1
+    kw = dict(method="DOP853", rtol=1e-12, atol=1e-14, dense_output=True)
+    z0 = [0.0, 0.0, float(np.hypot(*velocity)), float(np.arctan2(velocity[1], velocity[0]))]
+    slide = solve_ivp(rhs, (0.0, t_end), z0, events=stop, **kw)
+    t_stop = slide.t_events[0][0] if len(slide.t_events[0]) else np.inf
+    back = None
+    if t_stop < t_end and np.tan(alpha) > mu:
+        down = lambda s, z: [z[1], -g * load(s) * (sa - mu * ca)]  # noqa: E731
+        end = slide.sol(t_stop)
+        back = (end, solve_ivp(down, (t_stop, t_end), [0.0, 0.0], **kw).sol)
+    out = np.empty((t.size, 6))
+    for i, ti in enumerate(t):
+        x, y, sigma, psi = slide.sol(min(ti, t_stop))
+        u, w = sigma * np.cos(psi), sigma * np.sin(psi)
+        if ti >= t_stop:
+            u = w = 0.0
+            if back is not None:
+                (x, y, _, _), sol = back
+                ds, u = sol(ti)
+                x += ds
+        out[i] = [x * ca, y, x * sa, u * ca, w, u * sa]
+    return out, t_stop
+
+
+# ----------------------------------------------------------------------------------------------
 # Example utilities.
 
 

@@ -294,10 +294,14 @@ class Model(eqx.Module):
         return bool(self.projector.weighed_rows(self.algebraic.shape[0]).any())
 
     def law_reaction(self, t, h, y, f, args):
-        """The reaction (units of $f$) of the weighed rows' law at `(t, y)` under the
+        r"""The reaction (units of $f$) of the weighed rows' law at `(t, y)` under the
         smooth rate `f`, zero on other rows; `h` only sets the JVP's point $10^{-6} h$
-        (see `_weighed_start`)."""
-        s = 1e-6 * jnp.where(h > 0, h, 1.0)
+        (see `_weighed_start`), or $\sqrt\varepsilon\,h$ where that is larger (float32:
+        $3.5 \cdot 10^{-4} h$; at $10^{-6} h$ the point rounds to $y$ and a resting
+        contact reads as open). Not from the rate's size, as `projected_rate`'s point: a
+        friction law whose velocity comes to rest has a kink within a point moved out
+        that far (the interval block's stop then stalled the trapezoidal rule)."""
+        s = jnp.maximum(1e-6, jnp.sqrt(jnp.finfo(y.dtype).eps)) * jnp.where(h > 0, h, 1.0)
         return jnp.where(self.weighed, self._prox_rate(t, s, y, f, args) - f, 0.0)
 
     def _prox_rate(self, t, s, y, f, args):

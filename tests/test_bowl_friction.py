@@ -188,8 +188,9 @@ def test_ellipse_against_its_lagrangian():
 
 def test_bad_friction_and_axes():
     gap = lambda t, x, a: jnp.stack([1.0 - jnp.sqrt(x[0] ** 2 + x[1] ** 2)])
-    with pytest.raises(ValueError, match="`friction` needs unit masses"):
-        nj.Contact(gap, [0, 1], [2, 3], inverse_mass=np.eye(2), friction=0.3)
+    with pytest.raises(ValueError, match="`friction` needs an isotropic mass"):
+        nj.Contact(gap, [0, 1], [2, 3], inverse_mass=np.diag([1.0, 2.0]), friction=0.3)
+    nj.Contact(gap, [0, 1], [2, 3], inverse_mass=0.5 * np.eye(2), friction=0.3)
     with pytest.raises(ValueError, match="`friction` must be one finite coefficient"):
         nj.Contact(gap, [0, 1], [2, 3], friction=-0.1)
     with pytest.raises(ValueError, match="`axes` must be 2 finite semi-axes"):

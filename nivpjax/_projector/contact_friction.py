@@ -1,6 +1,7 @@
 """Coulomb friction on a unilateral contact whose normal turns (a curved wall)."""
 
 import jax.numpy as jnp
+import numpy as np
 
 from .ball import _safe_norm, project_ball
 from .base import AbstractProjector, Bound, ProjectionContext, resolve
@@ -10,25 +11,27 @@ from .predict import secant_crossing
 
 class FrictionalContact(AbstractProjector):
     r"""One unilateral contact with Coulomb friction in its tangent plane, on the contact's
-    velocity rows (unit masses): the velocity-level contact
+    velocity rows (unit or isotropic masses, $B = c\,W$): the velocity-level contact
     [`nivpjax.UnilateralContact`][] (its normal impulse $p_n\,n$, $n = W/|W|$ the unit
     normal at the iterate), then friction on the tangential part
 
-    $$ P(z) = z^+ - \Pi_{\mu |p_n|}\big((I - n n^T) z^+\big), \qquad z^+ = z + W p, $$
+    $$ P(z) = z^+ - \Pi_{\mu |B p|}\big((I - n n^T) z^+\big), \qquad z^+ = z + B p, $$
 
     $\Pi_r$ the projection onto the ball of radius $r$ in the tangent plane
     ([`nivpjax.project_ball`][]): the friction impulse opposes the tangential velocity
     and is at most $\mu$ times the normal impulse (stick where the tangential velocity
-    it meets is inside that bound). With unit masses and one contact the normal and
+    it meets is inside that bound). With isotropic masses and one contact the normal and
     tangential problems decouple, so this is the exact solution of the impulse-level
     Coulomb law $|p_t| \le \mu p_n$ with $p_t$ opposing the tangential velocity after
     the step (Moreau–Jean, De Saxcé's bipotential).
 
     Everything the contact decides (active set, impacts, events, the persistent contacts
-    of its law) is the contact's. Its reaction rows are weighed when the contact's are
-    (a curved gap): the friction force of a persistent contact, $-\mu N\,v_t/|v_t|$ in
-    slip and the holding force in stick, then enters the trapezoidal stages at both ends
-    like the vector field (see `Model.law_reaction`).
+    of its law) is the contact's. Its reaction rows are weighed, on a flat gap as on a
+    curved one: the friction force of a persistent contact, $-\mu N\,v_t/|v_t|$ in slip
+    and the holding force in stick, enters the trapezoidal stages at both ends like the
+    vector field (see `Model.law_reaction`). Applied whole at the stage's end instead, a
+    friction force that turns with the sliding velocity (a block thrown across a slope)
+    is integrated at first order.
 
     Events: a tangential velocity that passes through zero between the two ends of a
     step (a stick or a reversal; its smaller speed, in velocity units, is reported as a
@@ -44,7 +47,8 @@ class FrictionalContact(AbstractProjector):
 
     def _friction(self, z, out, ctx: ProjectionContext, y):
         # The tangential friction impulse taken off `out`, the contact's projection of z
-        # with normals at y; |out - z| is the normal impulse (one contact, unit masses).
+        # with normals at y; |out - z| is the normal impulse's velocity change (one contact,
+        # isotropic masses: the friction impulse's is bounded by mu times it).
         n = self._normal(ctx, y, z.dtype)
         mu = jnp.maximum(resolve(self.mu, ctx, z.dtype), 0.0).reshape(())
         tangential = out - n * jnp.dot(n, out)
@@ -120,4 +124,6 @@ class FrictionalContact(AbstractProjector):
         return self.contact.acts_on(n)
 
     def weighed_rows(self, n: int):
-        return self.contact.weighed_rows(n)
+        """Every row, whether the contact's are weighed (a curved gap) or not (a flat one:
+        its friction force still turns with the sliding velocity)."""
+        return np.ones(n, bool)

@@ -36,7 +36,9 @@ class Contact(AbstractEffect):
       `None` (frictionless): the contact's impulse $p_n$ then comes with a friction impulse
       in the tangent plane, $|p_t| \le \mu\,p_n$, opposing the tangential velocity
       ([`nivpjax.FrictionalContact`][]): a ball sliding or sticking on a wall. One
-      contact (`gap` of length 1) and unit masses only.
+      contact (`gap` of length 1), and an isotropic mass only (`inverse_mass` `None` or
+      a positive multiple of the identity: the normal and tangential impulses then
+      decouple; a general mass couples them through $W^T M^{-1} W$).
 
     The contact normals $W^T = \partial g / \partial q$ come from autodiff of `gap`. See
     [`nivpjax.UnilateralContact`][] for the active set, the LCP and event location.
@@ -75,9 +77,7 @@ class Contact(AbstractEffect):
         self.name = name
         self.curved = None if curved is None else bool(curved)
         if friction is not None and inverse_mass is not None:
-            raise ValueError(
-                "`friction` needs unit masses (`inverse_mass=None`), got an `inverse_mass`."
-            )
+            _check_isotropic(inverse_mass)
         if friction is not None and not callable(friction):
             mu = np.asarray(friction)
             if mu.size != 1 or not np.isfinite(mu).all() or mu.reshape(()) < 0:
@@ -124,6 +124,21 @@ class Contact(AbstractEffect):
             (self.velocities, on_velocities),
             (self.positions, HeldGaps(projector, self.velocities)),
         ]
+
+
+def _check_isotropic(inverse_mass):
+    # Friction's impulses decouple from the normal one for M^-1 = c I (c > 0) only.
+    try:
+        m = np.asarray(inverse_mass, float)
+    except Exception:  # a traced inverse mass: its value cannot be checked
+        m = None
+    ok = m is not None and m.ndim == 2 and m.shape[0] == m.shape[1] and m.size > 0
+    ok = ok and m[0, 0] > 0 and np.allclose(m, m[0, 0] * np.eye(m.shape[0]), rtol=0, atol=0)
+    if not ok:
+        raise ValueError(
+            "`friction` needs an isotropic mass (`inverse_mass` None or a concrete positive "
+            f"multiple of the identity), got inverse_mass={inverse_mass!r}."
+        )
 
 
 class _Gaps(eqx.Module):
