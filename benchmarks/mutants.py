@@ -996,17 +996,6 @@ MUTANTS = [
         ),
     ),
     Mutant(
-        "interpolation_second_order_sliding_stage_rates",
-        "events",
-        "nivpjax/_loop.py",
-        "f0, f1 = model.f(t0, ends0, args), model.f(t1, ends1, args)",
-        "f0, f1 = model.f(t0, y0, args), model.f(t1, y1, args)",
-        "_in_step's comment: a second-order sliding mode's end rates take its equivalent "
-        "control, not the stage's ringing selection (super-twisting's t_eval 400x the steps' "
-        "error with the trapezoidal rule)",
-        ("tests/test_twisting.py::test_t_eval_as_right_as_the_steps",),
-    ),
-    Mutant(
         "interpolation_end_stage_selection",
         "events",
         "nivpjax/_loop.py",
@@ -1661,6 +1650,19 @@ MUTANTS = [
 # test can kill measures nothing). Each was run and survived; the reason says why no test
 # can fail. Listed on docs/development/mutation.md.
 EQUIVALENT = {
+    "interpolation_second_order_sliding_stage_rates": (
+        "nivpjax/_loop.py",
+        "f0, f1 = model.f(t0, ends0, args), model.f(t1, ends1, args)  ->  "
+        "f0, f1 = model.f(t0, y0, args), model.f(t1, y1, args)",
+        "since `_held.on_second_order_surface` moves the state at t_eval onto sigma' = 0 "
+        "in a second-order sliding mode, the end rates of the rows it moves (super-"
+        "twisting's nu, the only rate the stage's ringing selection changes) no longer "
+        "reach the output, and the rows it does not move (x1, x2) have rates that do not "
+        "depend on w on the surface (k1 sqrt|sigma| = 0). Survived "
+        "test_t_eval_as_right_as_the_steps (38 s). Kept: the cubic it feeds is what the "
+        "output falls back to where the second-order control leaves its set inside the "
+        "step, and there the phase's rates are the right ones.",
+    ),
     "second_order_newton_moves_selections": (
         "nivpjax/_held.py",
         "return jnp.where(model.algebraic, 0.0, _rate(model, tt, yy, args))  ->  "

@@ -504,7 +504,10 @@ def interpolate(sol: Solution, t_eval, model: Model | None = None, args=None, st
     steps event prediction makes long), linearly on algebraic rows (multipliers), except
     selection rows, which take the selection of their phase at `t`
     (`_held.selections_inside`: a sliding mode's equivalent control, split where the
-    phase begins or ends inside the step).
+    phase begins or ends inside the step). In a second-order sliding mode held across
+    the step (super-twisting after its convergence) the state is moved onto the surface
+    and its first derivative, $\sigma = \dot\sigma = 0$, which the steps keep
+    (`_held.on_second_order_surface`).
 
     On rows a projector moves (`Model.rated_rows`), the rates are the ones the state
     takes (`Model.projected_rate`: zero normal motion where a set holds a row at a
