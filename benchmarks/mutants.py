@@ -1021,7 +1021,7 @@ MUTANTS = [
         "second_order_surface_without_sigma_step",
         "events",
         "nivpjax/_held.py",
-        "y = y - g.T @ jnp.where(free, mu, 0.0)",
+        "y = y - g.T @ mu",
         "y = y",
         "_onto_first_derivative's comment: the rows the surface reads go onto sigma = 0 "
         "first (sqrt|sigma| turns the interpolant's sigma ~ 1e-13 into 1e-6 of sigma': "
@@ -1032,8 +1032,8 @@ MUTANTS = [
         "second_order_surface_step_sign",
         "events",
         "nivpjax/_held.py",
-        "return y - B @ jnp.where(free, lam, 0.0)",
-        "return y + B @ jnp.where(free, lam, 0.0)",
+        "return y - B @ lam, ok_mu & ok_lam",
+        "return y + B @ lam, ok_mu & ok_lam",
         "_onto_first_derivative: a Newton step onto sigma' = 0 along the selections' columns",
         ("tests/test_twisting.py::test_t_eval_in_the_second_order_sliding_mode[Bathe]",),
     ),

@@ -171,28 +171,33 @@ def on_second_order_surface(model, t, t0, y0, t1, y1, y, args):
     free = _second_order_rows(model, sigma, t0, y0, t1, y1, args)
 
     def correct(y):
-        moved = _onto_first_derivative(model, free, t, y, args)
-        on_set = _second_order_newton(model, sigma, free, t, moved, args)
+        moved, ok = _onto_first_derivative(model, free, t, y, args)
+        # The selections' value only (their derivatives the interpolated ones): the
+        # capped slope of sqrt|sigma| at sigma = 0 makes the second-order control's
+        # derivatives meaningless (measured with them kept in `second_order_ends`:
+        # d x1 / d k2 at t_eval 55 where finite differences give 3e-3, trapezoidal rule).
+        w_eq = _second_order_newton(model, sigma, free, t, moved, args)
+        on_set = moved + jax.lax.stop_gradient(w_eq - moved)
         inside = jnp.all(~free | (jnp.abs(project(t, on_set) - on_set) <= _band(on_set)))
-        ok = inside & jnp.all(jnp.isfinite(on_set)) & jnp.all(jnp.isfinite(moved))
+        ok = ok & inside & jnp.all(jnp.isfinite(on_set))
         return jnp.where(ok, on_set, y)
 
     return jax.lax.cond(jnp.any(free), correct, lambda y: y, y)
 
 
 def _onto_first_derivative(model, free, t, y, args):
-    # `y` moved onto the surfaces of the rows `free` and their first derivatives along the
-    # flow (selections held, their rate 0), one Newton step each: the surface's rows of f
-    # (a held row's projection is a translation, so sigma = -rho f there; f itself has no
-    # round-off of w - P(w + rho f)). First the differential rows the surface reads, along
-    # its gradient (the least change: sqrt|sigma| terms, as super-twisting's, blow up the
-    # interpolant's small sigma); then the other differential rows, along the selections'
-    # columns of the rate's Jacobian. `y` where either step is not finite.
-    y = jax.lax.stop_gradient(y)
+    # `(y, ok)`: `y` moved onto the surfaces of the rows `free` and their first
+    # derivatives along the flow (selections held, their rate 0), one Newton step each:
+    # the surface's rows of f (a held row's projection is a translation, so sigma =
+    # -rho f there; f itself has no round-off of w - P(w + rho f)). First the
+    # differential rows the surface reads, along its gradient (the least change:
+    # sqrt|sigma| terms, as super-twisting's, blow up the interpolant's small sigma); then
+    # the other differential rows, along the selections' columns of the rate's Jacobian.
+    # The Jacobians carry no gradient (`_newton_step`): derivatives are those of the
+    # projection onto the constraints.
+    sg = jax.lax.stop_gradient
     diff = ~model.algebraic
     one = jnp.ones_like(t)
-    pair = free[:, None] & free[None, :]
-    eye = jnp.eye(y.shape[0], dtype=y.dtype)
 
     def surface(yy):
         return jnp.where(free, model.f(t, yy, args), 0.0)
@@ -203,15 +208,26 @@ def _onto_first_derivative(model, free, t, y, args):
             lambda tt, y2: jnp.where(free, model.f(tt, y2, args), 0.0), (t, yy), (one, rate)
         )[1]
 
-    g = jnp.where(free[:, None] & diff[None, :], jax.jacfwd(surface)(y), 0.0)
+    g = jnp.where(free[:, None] & diff[None, :], jax.jacfwd(surface)(sg(y)), 0.0)
     reads = jnp.any(g != 0, axis=0)
-    mu = _linalg.solve_or_nan(jnp.where(pair, g @ g.T, eye), surface(y))
-    y = y - g.T @ jnp.where(free, mu, 0.0)
-    B = jax.jacfwd(lambda yy: _rate(model, t, yy, args))(y)
+    mu, ok_mu = _newton_step(g @ g.T, surface(y), free)
+    y = y - g.T @ mu
+    B = jax.jacfwd(lambda yy: _rate(model, t, yy, args))(sg(y))
     B = jnp.where((diff & ~reads)[:, None] & free[None, :], B, 0.0)
-    J = jax.jacfwd(first)(y) @ B
-    lam = _linalg.solve_or_nan(jnp.where(pair, J, eye), first(y))
-    return y - B @ jnp.where(free, lam, 0.0)
+    lam, ok_lam = _newton_step(jax.jacfwd(first)(sg(y)) @ B, first(y), free)
+    return y - B @ lam, ok_mu & ok_lam
+
+
+def _newton_step(J, r, rows):
+    # `(step, ok)`: J^-1 r over `rows` (zero elsewhere), J restricted to them, and whether
+    # it is finite. The inverse carries no gradient and is zero where not finite, so a
+    # singular J gives no NaN in derivatives (reverse mode reaches it through `where`).
+    pair = rows[:, None] & rows[None, :]
+    eye = jnp.eye(r.shape[0], dtype=r.dtype)
+    inv = _linalg.inverse(jax.lax.stop_gradient(jnp.where(pair, J, eye)))
+    ok = jnp.all(jnp.isfinite(inv))
+    step = jnp.where(ok, inv, 0.0) @ jnp.where(rows, r, 0.0)
+    return jnp.where(rows, step, 0.0), ok
 
 
 def _second_order_rows(model, sigma, t0, y0, t1, y1, args):
