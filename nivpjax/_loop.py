@@ -8,7 +8,13 @@ import jax
 import jax.numpy as jnp
 
 from ._controller import AbstractController, StepInfo
-from ._held import held_start, phase_begins, second_order_ends, selections_inside
+from ._held import (
+    held_start,
+    on_second_order_surface,
+    phase_begins,
+    second_order_ends,
+    selections_inside,
+)
 from ._hermite import cubic_hermite
 from ._model import Model
 from ._results import RESULTS
@@ -498,7 +504,10 @@ def interpolate(sol: Solution, t_eval, model: Model | None = None, args=None, st
     steps event prediction makes long), linearly on algebraic rows (multipliers), except
     selection rows, which take the selection of their phase at `t`
     (`_held.selections_inside`: a sliding mode's equivalent control, split where the
-    phase begins or ends inside the step).
+    phase begins or ends inside the step). In a second-order sliding mode held across
+    the step (super-twisting after its convergence) the state is moved onto the surface
+    and its first derivative, $\sigma = \dot\sigma = 0$, which the steps keep
+    (`_held.on_second_order_surface`).
 
     On rows a projector moves (`Model.rated_rows`), the rates are the ones the state
     takes (`Model.projected_rate`: zero normal motion where a set holds a row at a
@@ -579,6 +588,7 @@ def _in_step(model: Model, t, w, t0, y0, t1, y1, args, stepper=None):
         y = jnp.where(model.algebraic | projected, linear, hermite)
         if model.has_weighed:
             y = _persistent(model, t0, y0, f0, t1, y1, f1, h, w, args, y)
+        y = _on_surface(model, t, t0, y0, t1, y1, y, args)
         return _selections(model, t, t0, y0, t1, y1, y, args)
     p0, held0 = model.projected_rate(t0, h, y0, f0, args)
     p1, held1 = model.projected_rate(t1, h, y1, f1, args)
@@ -595,6 +605,7 @@ def _in_step(model: Model, t, w, t0, y0, t1, y1, args, stepper=None):
         free = ~sets & ~model.weighed  # rows the cases above leave to the cubic
         y = _come_to_rest(model, t0, y0, t1, y1, r0, r1, y, w, args, free)
     y = jnp.where(model.algebraic, linear, y)
+    y = _on_surface(model, t, t0, y0, t1, y1, y, args)
     y = model.project_rows(t, h, y, sets, args)
     return _selections(model, t, t0, y0, t1, y1, y, args)
 
@@ -621,6 +632,14 @@ def _stopped_inside(model: Model, t0, y0, y1, p0, p1, scale, rows, h, w, y, args
     stopped = rows & (jnp.abs(p0) > small) & (jnp.abs(p1) <= small)
     da0 = h * _rate_change(model, t0, y0, p0, args)
     return jnp.where(stopped, _stuck(y0, y1, p0, da0, h, w), y)
+
+
+def _on_surface(model: Model, t, t0, y0, t1, y1, y, args):
+    # A second-order sliding mode held across the step: the differential state moved onto
+    # the surface's first derivative (`_held.on_second_order_surface`).
+    if not model.has_selections:
+        return y
+    return on_second_order_surface(model, t, t0, y0, t1, y1, y, args)
 
 
 def _selections(model: Model, t, t0, y0, t1, y1, y, args):
