@@ -2,26 +2,9 @@ import getpass
 import os
 import tempfile
 
-
-def _compile_quickly():
-    # The suite compiles a program or two per test and runs each for milliseconds: most of
-    # its time is XLA's CPU compiler, and most of that is LLVM optimising the code. At
-    # optimisation level 0 (measured, one process, the same programs: the block on a cone
-    # with outputs 14.8 -> 10.3 CPU s to compile, 17 -> 36 ms to run; the relay with Bathe
-    # 10.5 -> 6.5 s and 7.6 -> 11.6 ms). Floating-point semantics are XLA's at every level
-    # (no fast math). `NIVPJAX_TEST_OPTIMISED=1`, or a level in the user's own XLA_FLAGS,
-    # keeps XLA's default. Set before JAX starts its backend.
-    flags = os.environ.get("XLA_FLAGS", "")
-    if os.environ.get("NIVPJAX_TEST_OPTIMISED") or "xla_backend_optimization_level" in flags:
-        return
-    os.environ["XLA_FLAGS"] = f"{flags} --xla_backend_optimization_level=0".strip()
-
-
-_compile_quickly()
-
-import jax  # noqa: E402
-import jax.random as jr  # noqa: E402
-import pytest  # noqa: E402
+import jax
+import jax.random as jr
+import pytest
 
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
