@@ -2,7 +2,10 @@
 
 from . import scenes as scenes
 from ._batched import lockstep_waste as lockstep_waste, solve_batched as solve_batched
-from ._cache import enable_persistent_cache as enable_persistent_cache
+from ._cache import (
+    clear_caches as clear_caches,
+    enable_persistent_cache as enable_persistent_cache,
+)
 from ._compiler import compiler_options as compiler_options
 from ._controller import (
     AbstractController as AbstractController,

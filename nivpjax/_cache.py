@@ -25,6 +25,7 @@ import contextlib
 import functools
 import threading
 import types
+import weakref
 from typing import Any
 
 import equinox as eqx
@@ -238,6 +239,28 @@ def _aval_key(x):
     return (x.shape, x.dtype, getattr(x, "weak_type", False))
 
 
+# Every `CachedJit`, for `clear_caches`.
+_INSTANCES: "weakref.WeakSet[CachedJit]" = weakref.WeakSet()
+
+
+def clear_caches():
+    """Drop every compiled program nivpjax holds (the solve boundary's cache) and JAX's own
+    caches (`jax.clear_caches()`), so that the compiled code can be freed; the next call of
+    each program traces and compiles again (or loads it from the persistent cache, see
+    [`nivpjax.enable_persistent_cache`][]).
+
+    A process that compiles thousands of distinct programs (a long notebook, a sweep over
+    model structures, a test suite) needs it: each XLA CPU executable holds about twenty
+    memory mappings while it lives, and Linux allows a process 65 530 of them
+    (`vm.max_map_count`). Past that, compilation fails, and jaxlib 0.10 then crashes the
+    process (a segmentation fault or an abort while it raises the compile error) rather
+    than raising.
+    """
+    for cached in list(_INSTANCES):
+        cached.cache_clear()
+    jax.clear_caches()
+
+
 class CachedJit:
     """`jax.jit` of `fn(*args)` keyed by the traced structure of `args` (see the module
     docstring). Arrays anywhere in `args` and floats closed over by functions in `args` are
@@ -253,6 +276,7 @@ class CachedJit:
         self._counts = collections.Counter()
         self._apply: dict = {}
         functools.update_wrapper(self, fn)
+        _INSTANCES.add(self)
 
     def prepare(self, *args) -> PreparedCall:
         splitter = _Splitter(hoist=True)
@@ -421,6 +445,7 @@ class CachedJit:
             self._programs.clear()
             self._static_only.clear()
             self._seen.clear()
+            self._apply.clear()
 
 
 def enable_persistent_cache(path: str, min_compile_time_secs: float = 0.0):
