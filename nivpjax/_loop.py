@@ -105,6 +105,16 @@ def _finish_attempts(log: AttemptLog | None) -> AttemptLog | None:
     )
 
 
+def held_to_control(stepper: AbstractStepper, controller: AbstractController):
+    """`stepper` with its stages' nonlinear solves held `STAGE_FRACTION` times tighter
+    than `controller`'s tolerances (unchanged where the solver's own are tighter, or the
+    controller holds steps to none)."""
+    tolerances = controller.tolerances()
+    if tolerances is None:
+        return stepper
+    return stepper.with_solver(stepper.solver.within(*tolerances))
+
+
 def init_state(
     model: Model,
     stepper: AbstractStepper,
@@ -124,6 +134,7 @@ def init_state(
     consistent algebraic components, empty buffers (`max_steps + 1` rows; none without
     `save_steps`, and then NaN states at `t_eval` to be filled in the loop)."""
     dtype = y0.dtype
+    stepper = held_to_control(stepper, controller)
     error_order = _error_order(stepper, controller)
     h_min = controller.bounds[0]
     h_min = default_h_min(t0, t1, dtype) if h_min is None else jnp.asarray(h_min, dtype)
@@ -238,6 +249,7 @@ def _write_rows(s: _LoopState, rows: dict, idx, accept) -> _LoopState:
 def _advance(s: _LoopState, model, stepper, controller, t1, args, error_mask, progress, t_eval):
     # `attempt` without the buffer writes: the new state (buffers as they were), the row
     # of each saved-step buffer, and whether the step was accepted.
+    stepper = held_to_control(stepper, controller)
     h_min = s.h_min
     h_max = controller.bounds[1]
     remaining = t1 - s.t

@@ -137,3 +137,31 @@ def test_departures_from_a_face_keep_the_error_proportional(stepper):
             assert row["ok"], (point, rtol, row["result"])
             ratios.append(row["error"] / (family.C * rtol ** (2 / 3)))
         assert max(ratios) <= 1.0 and max(ratios) <= 2 * min(ratios), (point, ratios)
+
+
+def test_fixed_point_stages_are_held_below_the_error_control():
+    """A stage solved only to the solver's own default (1e-8) under a controller at rtol
+    1e-8: the fixed-point iteration (linear convergence, it stops at its tolerance) left
+    the slider's error 2x semismooth Newton's with the default controller, and the PI
+    controller ran out of steps. The loop holds a stage's solve `STAGE_FRACTION` (1e-3)
+    below the controller's tolerances: both now reach Newton's error."""
+    family = FAMILIES["stick_slip"]
+    errors = {}
+    for solver in ("VI", "SSN"):
+        scene, run = campaign.compiled_run(family, "Bathe", solver, "PI")
+        row = campaign.run_one(family, scene, run, family.grid[0], 1e-8)
+        assert row["ok"], row
+        errors[solver] = row["error"]
+    assert errors["VI"] <= 1.1 * errors["SSN"], errors
+
+
+def test_a_solver_is_held_to_the_tighter_of_its_tolerances_and_the_controllers():
+    import jax.numpy as jnp
+
+    import nivpjax as nj
+
+    for solver in (nj.FixedPointVI(), nj.SemismoothNewton(rtol=1e-12, atol=1e-9)):
+        held = solver.within(jnp.asarray(1e-7), jnp.asarray(1e-12))
+        assert float(held.rtol) == min(solver.rtol, 1e-10)
+        assert float(held.atol) == min(solver.atol, 1e-15)
+        assert float(solver.within(1e-3, 1e-6).rtol) == solver.rtol  # its own, tighter

@@ -67,6 +67,13 @@ class AbstractController(eqx.Module):
         [`nivpjax.Richardson`][]) even where the stepper embeds one."""
         return False
 
+    def tolerances(self):
+        """`(rtol, atol)` that each step's error is held to, or `None` where the controller
+        does not hold steps to a tolerance. A stage's nonlinear solve is then held at
+        least `STAGE_FRACTION` times tighter (see
+        [`nivpjax.AbstractNonlinearSolver`][])."""
+        return None
+
     @property
     def requires_h0(self) -> bool:
         """Whether `solve` must be given `h0` (no step-size estimate of its own)."""

@@ -115,6 +115,9 @@ class PIDController(AbstractController):
         ):
             raise ValueError(f"`error_order` must be an int >= 1, got {self.error_order!r}.")
 
+    def tolerances(self):
+        return self.rtol, self.atol
+
     @property
     def needs_error_estimate(self) -> bool:
         return True

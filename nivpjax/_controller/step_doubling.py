@@ -70,6 +70,9 @@ class StepDoublingController(AbstractController):
         if self.order is not None and plain_int(self.order) < 1:
             raise ValueError(f"`order` must be an int >= 1, got {self.order!r}.")
 
+    def tolerances(self):
+        return self.rtol, self.atol
+
     @property
     def needs_error_estimate(self) -> bool:
         return True

@@ -30,7 +30,10 @@ class SemismoothNewton(AbstractNonlinearSolver):
     **Arguments:**
 
     - `rtol`, `atol`: stop when $\max_i |G_i| / (\text{atol} + \text{rtol}|y_i|) \le 1$,
-      after at least one iteration.
+      after at least one iteration. Inside a solve the loop tightens both to 1e-3 times
+      the step's error control's where that is tighter
+      ([`within`][nivpjax.AbstractNonlinearSolver.within]): defaults 1e-8 and 1e-10
+      hold from a controller's rtol 1e-5 and atol 1e-7 up.
     - `max_steps`: cap on Newton iterations.
     - `full_steps`: number of initial iterations without line search.
     - `sigma`, `beta`, `max_backtracks`: Armijo constant, backtracking factor and cap.

@@ -48,6 +48,12 @@ class AbstractStepper(eqx.Module):
     def error_order(self) -> int:
         return 0
 
+    def with_solver(self, solver: AbstractNonlinearSolver) -> "AbstractStepper":
+        """This stepper with its stages solved by `solver` (the loop passes its own solver
+        held to the error control's tolerances, see
+        [`nivpjax.AbstractNonlinearSolver`][])."""
+        return eqx.tree_at(lambda s: s.solver, self, solver)
+
     @property
     def locates_events(self) -> bool:
         """Whether the stepper locates the model's events itself and ends its steps there

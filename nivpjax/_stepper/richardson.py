@@ -19,6 +19,9 @@ class Richardson(AbstractStepper):
     def solver(self):
         return self.stepper.solver
 
+    def with_solver(self, solver):
+        return Richardson(self.stepper.with_solver(solver))
+
     @property
     def order(self) -> int:
         return self.stepper.order
