@@ -17,7 +17,7 @@ back on it) against the reference's times. Fixed steps: `ConstantStepSize`, h = 
 0.005 (bead) and 0.02 .. 0.005 (bowl), the largest state error over the steps, and the
 observed orders.
 
-    OPENBLAS_NUM_THREADS=1 python -m benchmarks.bowl_audit [--quick]
+    OPENBLAS_NUM_THREADS=1 python -m benchmarks.bowl_audit [--quick] [--thrown]
 
 Writes benchmarks/results/bowl_audit.json (the table in bowl_audit.md quotes it).
 """
@@ -111,17 +111,17 @@ def trajectory(sol):
     )
 
 
-def events(ts, gap):
-    """The release (the last step on the wall before the first flight) and the landing (the
-    first step back on it), from the gap at the steps: on the wall is |gap| <= 1e-10."""
-    on = np.abs(gap) <= 1e-10
-    off = np.nonzero(~on)[0]
-    if off.size == 0:
-        return np.nan, np.nan
-    first_off = off[0]
-    back = np.nonzero(on[first_off:])[0]
-    landing = ts[first_off + back[0]] if back.size else np.nan
-    return float(ts[first_off - 1]), float(landing)
+def events(ts, gap, normal, tol):
+    """The release and the landing from the steps: the release the end of the last step
+    whose normal reaction is positive before the flight (the first step open by more than
+    1e-2, mid-flight), the landing the first step after it whose gap is within `tol`
+    (atol + rtol R) of the wall."""
+    flight = int(np.argmax(gap > 1e-2))
+    pressed = np.nonzero(normal[:flight] > 1e-8 * np.max(normal))[0]
+    back = np.nonzero(gap[flight:] <= tol)[0]
+    release = float(ts[1:][pressed[-1]]) if pressed.size else np.nan
+    landing = float(ts[flight + back[0]]) if back.size else np.nan
+    return release, landing
 
 
 def measure(case, stepper, runner, rtol):
@@ -153,7 +153,7 @@ def measure(case, stepper, runner, rtol):
     )
     if case == "thrown":
         pieces = bowl_pieces(x0[2], g, t1)
-        release, landing = events(ts, gap)
+        release, landing = events(ts, gap, normal, rtol / 100 + rtol)
         row.update(
             release=release,
             landing=landing,
@@ -181,15 +181,18 @@ def fixed(case, stepper, runner, hs):
 def main():
     quick = "--quick" in sys.argv
     rtols = RTOLS[::2] if quick else RTOLS
-    out = dict(adaptive=[], fixed=[])
+    thrown_only = "--thrown" in sys.argv  # rerun the thrown ball's rows only
+    out = json.loads(OUT.read_text()) if thrown_only else dict(adaptive=[], fixed=[])
+    if thrown_only:
+        out["adaptive"] = [row for row in out["adaptive"] if row["case"] != "thrown"]
     for stepper in STEPPERS:
-        if stepper != "EmbeddedBETR":
+        if stepper != "EmbeddedBETR" and not thrown_only:
             runner = fixed_runner(stepper)
             for case, hs in (("bead", (0.04, 0.02, 0.01, 0.005)), ("bowl", (0.02, 0.01, 0.005))):
                 out["fixed"].append(fixed(case, stepper, runner, hs))
                 print(out["fixed"][-1], flush=True)
         runner = adaptive_runner(stepper)
-        for case in CASES:
+        for case in ("thrown",) if thrown_only else CASES:
             for rtol in rtols:
                 out["adaptive"].append(measure(case, stepper, runner, rtol))
                 row = out["adaptive"][-1]
