@@ -229,8 +229,12 @@ MUTANTS = [
         "lift_off = jnp.min(lift, initial=jnp.inf)",
         "lift_off = jnp.inf",
         "UnilateralContact.next_event: a resting contact predicts its lift-off (measured: "
-        "dv(T)/dg off by 2.2e-3 on a plastic contact)",
-        (TS + "test_plastic_contact_closing_and_opening",),
+        "dv(T)/dg off by 2.2e-3 on a plastic contact; without it the thrown ball's release "
+        "from a curved wall is late beyond its bound: Bathe and TR, TR's 3.4e-3 late)",
+        (
+            TS + "test_plastic_contact_closing_and_opening",
+            "tests/test_curved_contact.py::test_adaptive_error_falls_with_rtol[thrown-bathe]",
+        ),
     ),
     Mutant(
         "contact_landed_margin",
