@@ -294,3 +294,29 @@ def test_a_plain_contact_on_a_curved_gap():
     )
     ts, ys, _ = _trajectory(sol)
     assert np.max(np.abs(ys - _exact("bead", ts))) < 10 * rtol ** (2 / 3)
+
+
+def test_a_moving_surface_is_refused():
+    # The contact laws read the gap's rate as W^T v, without dg/dt: a floor rising under a
+    # ball at rest (gap q - t, no gravity) was passed through unseen, `successful` with
+    # the ball left at q = 0, 1 m below the floor at t = 1 (Bathe and backward Euler,
+    # rtol 1e-5). A gap that reads the time is refused before any work.
+    from nivpjax._scene.curvature import gap_reads_time
+
+    x = jnp.array([0.0, 0.0])
+    assert gap_reads_time(lambda t, x, a: x[:1] - t, 0.0, x, None)
+    assert gap_reads_time(lambda t, x, a: x[:1] - a * jnp.sin(t), 0.0, x, 2.0)
+    assert not gap_reads_time(lambda t, x, a: x[:1] - a, 0.0, x, 2.0)
+    flags = []
+
+    @jax.jit
+    def traced(y, c):
+        flags.append(gap_reads_time(lambda t, x, a: x[:1] - a * x[1], 0.0, y, c))
+        return y
+
+    traced(x, 0.5)
+    assert flags == [False]
+    rising = nj.Contact(lambda t, x, a: jnp.stack([x[0] - t]), [0], [1], restitution=0.0)
+    scene = nj.Scene(lambda t, x, a, m: jnp.stack([x[1], 0.0]), 2, (rising,))
+    with pytest.raises(ValueError, match="`gap` depends on the time"):
+        scene.solve(0.0, 1.0, x, None, stepper=nj.Bathe())
