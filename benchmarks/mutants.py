@@ -1645,6 +1645,16 @@ MUTANTS = [
         (TBF + "test_t_eval_as_accurate_as_the_steps[bathe]",),
     ),
     Mutant(
+        "moving_gap_accepted",
+        "projectors",
+        "nivpjax/_scene/curvature.py",
+        "return _reads_inputs(closed.jaxpr, consts=False)",
+        "return False",
+        "Contact refuses a gap that reads the time (the laws take its rate as W^T v: a rising "
+        "floor passed through a ball, 'successful')",
+        ("tests/test_curved_contact.py::test_a_moving_surface_is_refused",),
+    ),
+    Mutant(
         "curved_contact_not_weighed",
         "projectors",
         "nivpjax/_scene/contact.py",
