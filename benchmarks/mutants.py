@@ -229,8 +229,12 @@ MUTANTS = [
         "lift_off = jnp.min(lift, initial=jnp.inf)",
         "lift_off = jnp.inf",
         "UnilateralContact.next_event: a resting contact predicts its lift-off (measured: "
-        "dv(T)/dg off by 2.2e-3 on a plastic contact)",
-        (TS + "test_plastic_contact_closing_and_opening",),
+        "dv(T)/dg off by 2.2e-3 on a plastic contact; without it the thrown ball's release "
+        "from a curved wall is late beyond its bound: Bathe and TR, TR's 3.4e-3 late)",
+        (
+            TS + "test_plastic_contact_closing_and_opening",
+            "tests/test_curved_contact.py::test_adaptive_error_falls_with_rtol[thrown-bathe]",
+        ),
     ),
     Mutant(
         "contact_landed_margin",
@@ -1639,6 +1643,16 @@ MUTANTS = [
         "p0, p1 = model.to_state(f0), model.to_state(f1 + law1)",
         "t_eval on a persistent contact: the start's rate includes the law's reaction",
         (TBF + "test_t_eval_as_accurate_as_the_steps[bathe]",),
+    ),
+    Mutant(
+        "moving_gap_accepted",
+        "projectors",
+        "nivpjax/_scene/curvature.py",
+        "return _reads_inputs(closed.jaxpr, consts=False)",
+        "return False",
+        "Contact refuses a gap that reads the time (the laws take its rate as W^T v: a rising "
+        "floor passed through a ball, 'successful')",
+        ("tests/test_curved_contact.py::test_a_moving_surface_is_refused",),
     ),
     Mutant(
         "curved_contact_not_weighed",

@@ -403,6 +403,67 @@ def ellipse_bowl_state(t, s0, sd0, a, b, g):
     return np.concatenate([q, v], 1), normal
 
 
+def ellipse_friction_bowl_state(t, s0, sd0, a, b, g, mu):
+    r"""`(q1, q2, v1, v2)` at the times `t` (array) of a ball sliding with Coulomb friction
+    `mu` on the wall of the elliptic bowl $(x/a)^2 + (y/b)^2 \le 1$, from parameter `s0` at
+    rate `sd0`, never leaving it; and the time it sticks for good (`inf` if not before
+    `t.max()`). With $q = (a \sin s, -b \cos s)$, $n$ the wall's inward unit normal and
+    $\sigma$ the sign of $s'$, sliding is
+
+    $$ |q_s|^2 s'' + (q_s \cdot q_{ss}) s'^2 = -g\,y_s - \mu\,\sigma N |q_s|,
+    \qquad N = (q_{ss} \cdot n)\,s'^2 + g\,n_y $$
+
+    (the normal force per unit mass: the normal part of the acceleration plus gravity's,
+    independent of $s''$). Where $s' = 0$ the ball stays for good if gravity's tangential
+    part is within the cone, $|y_s|/|q_s| \le \mu\,n_y$, and slides back otherwise. DOP853 at
+    rtol 1e-12, each stop located as an event. With `a == b` it is `friction_bowl_state`."""
+
+    def frame(s):
+        qs = np.array([a * np.cos(s), b * np.sin(s)])
+        qss = np.array([-a * np.sin(s), b * np.cos(s)])
+        n = -np.array([np.sin(s) / a, -np.cos(s) / b])  # -(x/a^2, y/b^2) on the wall
+        return qs, qss, n / np.linalg.norm(n)
+
+    t = np.atleast_1d(np.asarray(t, float))
+    t_end = max(float(t.max()), 1e-12)
+    pieces, t0, s, sd, t_stick = [], 0.0, float(s0), float(sd0), np.inf
+    while t0 < t_end:
+        qs, _, n = frame(s)
+        if sd == 0 and abs(qs[1]) / np.linalg.norm(qs) <= mu * n[1]:
+            t_stick = t0
+            break
+        sigma = np.sign(sd) if sd != 0 else -np.sign(qs[1])
+
+        def rhs(_, z, sigma=sigma):
+            qs, qss, n = frame(z[0])
+            normal = (qss @ n) * z[1] ** 2 + g * n[1]
+            force = -g * qs[1] - mu * sigma * normal * np.linalg.norm(qs)
+            return [z[1], (force - (qs @ qss) * z[1] ** 2) / (qs @ qs)]
+
+        def stop(_, z):
+            return z[1]
+
+        stop.terminal, stop.direction = True, -sigma
+        kw = dict(method="DOP853", rtol=1e-12, atol=1e-14, dense_output=True, events=stop)
+        sol = solve_ivp(rhs, (t0, t_end), [s, sd], **kw)
+        stopped = len(sol.t_events[0]) > 0
+        t1 = sol.t_events[0][0] if stopped else t_end
+        pieces.append((t0, t1, sol.sol))
+        if not stopped:
+            break
+        t0, s, sd = t1, float(sol.sol(t1)[0]), 0.0
+    out = np.empty((t.size, 4))
+    for i, ti in enumerate(t):
+        if not pieces or ti >= t_stick:
+            sj, sdj = (s, 0.0) if pieces or ti >= t_stick else (s0, sd0)
+        else:
+            _, t1, dense = next((p for p in pieces if ti <= p[1]), pieces[-1])
+            sj, sdj = dense(min(ti, t1))
+        qs, _, _ = frame(sj)
+        out[i] = [a * np.sin(sj), -b * np.cos(sj), *(qs * sdj)]
+    return out, t_stick
+
+
 # ----------------------------------------------------------------------------------------------
 # A block on an inclined plane of angle alpha (a flat contact), thrown in the plane with velocity
 # (u, w) along (up-slope, across), gravity g (1 + amp sin(omega t)) pressing it. Sliding, in the

@@ -7,7 +7,7 @@ import numpy as np
 
 from .._projector import Bound, FrictionalContact, HeldGaps, UnilateralContact
 from .base import AbstractEffect, OnScene, scene_state
-from .curvature import gap_is_affine
+from .curvature import gap_is_affine, gap_reads_time
 
 
 class Contact(AbstractEffect):
@@ -15,7 +15,9 @@ class Contact(AbstractEffect):
     \dots v \dots)$ with $q' = v$: gaps $g(q) \ge 0$, impact law
     $0 \le u^+ + e u^- \perp p \ge 0$ with $u = \nabla g^T v$.
 
-    - `gap(t, x, args) -> (m,)`: signed distances.
+    - `gap(t, x, args) -> (m,)`: signed distances, of the positions and parameters only
+      (a gap that reads `t`, a moving surface, is refused: the laws take its rate as
+      $\nabla g^T v$).
     - `positions`, `velocities`: indices of $q$ and $v$ in $x$ (same length).
     - `restitution`: $e$, scalar, per contact, or callable `(t, y, args)`.
     - `inverse_mass`: $M^{-1}$ (constant, `(n_dof, n_dof)`), default identity: impulses
@@ -92,6 +94,15 @@ class Contact(AbstractEffect):
         m = jax.eval_shape(lambda: jnp.atleast_1d(self.gap(t, x, args))).shape[0]
         if self.friction is not None and m != 1:
             raise ValueError(f"`friction` needs one contact (`gap` of length 1), got {m}.")
+        if gap_reads_time(self.gap, t, x, args):
+            # The contact laws read the gap's rate as W^T v: a surface that moves would pass
+            # through the body unseen (a floor rising under a ball at rest: `successful`,
+            # the ball left 1 m below it after 1 s).
+            raise ValueError(
+                "`gap` depends on the time `t`: moving surfaces are not supported (the "
+                "contact's normal velocity is dg/dq . v, without dg/dt). Write the gap "
+                "in the positions and parameters only."
+            )
 
     def resolved(self, t, x, args) -> "Contact":
         """With `curved=None`, this contact with `curved` set: `False` when the Hessian

@@ -1,4 +1,5 @@
-"""Whether a contact's gap is affine in the positions, read off its traced Hessian."""
+"""Whether a contact's gap is affine in the positions, read off its traced Hessian; whether
+it reads the time."""
 
 import jax
 import jax.numpy as jnp
@@ -33,11 +34,25 @@ def gap_is_affine(gap, positions, t, x, args) -> bool:
     return all(np.all(np.asarray(o) == 0) for o in out)
 
 
-def _reads_inputs(jaxpr) -> bool:
+def gap_reads_time(gap, t, x, args) -> bool:
+    r"""`True` when the traced program of `gap(t, x, args)` carries the time to its value
+    (forward data flow from `t` alone; the state and the parameters are held fixed): a
+    moving surface, $\partial g/\partial t \ne 0$. Conservative: a program that reads `t`
+    and then drops it through a nested call counts as reading it."""
+    x = jnp.asarray(x)
+    t = jnp.asarray(t, x.dtype)
+    closed = jax.make_jaxpr(lambda t: jnp.atleast_1d(gap(t, x, args)))(
+        jax.ShapeDtypeStruct(t.shape, t.dtype)
+    )
+    return _reads_inputs(closed.jaxpr, consts=False)
+
+
+def _reads_inputs(jaxpr, consts=True) -> bool:
     # Forward data flow from the inputs and the closed-over constants (traced parameters
-    # among them) to the outputs, over the top-level equations (a nested program's inputs
-    # are its equation's inputs, so this is conservative).
-    reached = {id(v) for v in (*jaxpr.invars, *jaxpr.constvars)}
+    # among them; `consts=False`: from the inputs only) to the outputs, over the top-level
+    # equations (a nested program's inputs are its equation's inputs, so this is
+    # conservative).
+    reached = {id(v) for v in (*jaxpr.invars, *(jaxpr.constvars if consts else ()))}
     for eqn in jaxpr.eqns:
         if any(id(v) in reached for v in eqn.invars if not isinstance(v, Literal)):
             reached.update(id(v) for v in eqn.outvars)
