@@ -62,6 +62,7 @@ from _references_mechanics import (  # noqa: E402
     block_state,
     bowl_state,
     ellipse_bowl_state,
+    ellipse_friction_bowl_state,
     friction_bowl_state,
     slider_event_driven,
 )
@@ -498,6 +499,34 @@ BOWL_ELLIPSE = Family(
 )
 
 
+def _ellipse_friction_error(p, ts, xs):
+    # The whole state: no impact, velocities are continuous (kinks at the stops).
+    exact, _ = ellipse_friction_bowl_state(
+        ts, p["phi0"], p["v0"] / p["a"], p["a"], 1.0, 9.81, p["mu"]
+    )
+    return _max_error(xs[:, :4], exact)
+
+
+BOWL_ELLIPSE_FRICTION = Family(
+    "bowl_ellipse_friction",
+    "Contact(friction=mu) on an ellipse: friction on a wall of varying curvature",
+    "A ball sliding with Coulomb friction on the wall of an elliptic bowl (semi-axes a x 1) "
+    "to a stick",
+    _bowl_friction_make,
+    (
+        # Thrown, turns back where the wall is too steep, sticks at t = 1.8845.
+        {"a": 1.5, "mu": 0.3, "phi0": 0.0, "v0": 3.0},
+        # A narrow bowl: turns back twice, sticks at t = 1.7489.
+        {"a": 0.7, "mu": 0.2, "phi0": 0.0, "v0": 2.0},
+        # Released from rest high on the wall, slides down, sticks at t = 1.4173.
+        {"a": 1.5, "mu": 0.2, "phi0": 0.8, "v0": 0.0},
+    ),
+    2.0,
+    _ellipse_friction_error,
+    5.0,
+)
+
+
 FAMILIES = {
     f.name: f
     for f in (
@@ -515,5 +544,6 @@ FAMILIES = {
         BOWL,
         BOWL_FRICTION,
         BOWL_ELLIPSE,
+        BOWL_ELLIPSE_FRICTION,
     )
 }
