@@ -457,8 +457,8 @@ MUTANTS = [
         "float32_tolerances_unclamped",
         "nonlinear",
         N + "base.py",
-        "return max(float(rtol), 8 * eps), max(float(atol), 8 * eps)",
-        "return float(rtol), float(atol)",
+        "floor = 8 * float(jnp.finfo(dtype).eps)",
+        "floor = 0.0 * float(jnp.finfo(dtype).eps)",
         "effective_tolerances: a float32 solve asked for 1e-12 would otherwise never converge",
         (
             TN + "test_float32_tolerances_are_clamped_to_its_resolution",

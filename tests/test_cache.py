@@ -322,6 +322,8 @@ def test_clear_caches_frees_the_compiled_programs():
     """`nj.clear_caches` drops the solve cache's programs and releases their executables'
     memory mappings (what a long process runs out of); the next solve compiles again and
     gives the same answer."""
+    nj.clear_caches()  # a clean start: earlier tests' programs freed now, not during this one
+    gc.collect()
     sol = _solve(decay(1.0), max_steps=96)  # a structure of its own
     held = _mappings()
     for k in range(1, 9):  # eight more programs, each with executables of its own
