@@ -540,6 +540,11 @@ def interpolate(sol: Solution, t_eval, model: Model | None = None, args=None, st
     (a contact's velocity jumps inside a step, which no rate per end describes; a
     resting contact's force is not in the vector field).
 
+    The quantities of a step alone (its start, the rates and their derivatives at both
+    ends, the rows where a phase begins or ends, the held selection rows) are computed
+    once per step (`_step_parts`); each output time adds its polynomial, the projection
+    and the selections' equivalent control at its own state (`_values`).
+
     With `stepper`, a stepper that has its own continuous extension
     (`AbstractStepper.dense_output`: the event-driven stepper's, of order 4) gives the
     states inside the steps it vouches for.
