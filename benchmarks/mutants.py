@@ -1014,7 +1014,7 @@ MUTANTS = [
         "second_order_surface_skipped",
         "events",
         "nivpjax/_loop.py",
-        "    return on_second_order_surface(model, t, t0, y0, t1, y1, y, args)\n",
+        '    return on_second_order_surface(model, t, t0, y0, t1, y1, y, args, p["surface"])\n',
         "    return y\n",
         "on_second_order_surface's docstring: in a second-order sliding mode the state at "
         "t_eval lies on sigma' = 0, which the steps keep (super-twisting's nu = -d - c x2; "
@@ -1045,8 +1045,8 @@ MUTANTS = [
         "come_to_rest_skipped",
         "events",
         "nivpjax/_loop.py",
-        "return _stopped_inside(model, t0, y0, y1, moving, r1, r1, rows, t1 - t0, w, y, args)",
-        "return y",
+        "return _stopped_inside(model, t0, y0, moving, r1, r1, rows, t1 - t0, args)",
+        "return _stopped_inside(model, t0, y0, moving, r1, r1, rows & False, t1 - t0, args)",
         "_come_to_rest's comment: a row at rest at the end of a step in which a phase begins "
         "follows the flow up to its stop, not a cubic bent to arrive with zero rate",
         ("tests/test_twisting.py::test_t_eval_across_a_stop_inside_a_step",),
@@ -1098,8 +1098,8 @@ MUTANTS = [
         "interpolation_unprojected_rates",
         "controllers",
         "nivpjax/_loop.py",
-        "y = cubic_hermite(y0, y1, h * p0, h * p1, w)",
-        "y = cubic_hermite(y0, y1, h * r0, h * r1, w)",
+        'p["m0"], p["m1"] = h * p0, h * p1',
+        'p["m0"], p["m1"] = h * r0, h * r1',
         "interpolate's docstring: rows a projector moves take the rates the state has "
         "(zero normal motion at a held face, friction's reaction added), not f's",
         (
@@ -1629,8 +1629,8 @@ MUTANTS = [
         "persistent_teval_linear",
         "interpolation",
         "nivpjax/_loop.py",
-        "y = jnp.where(rows, cubic_hermite(y0, y1, h * p0, h * p1, w), y)",
-        "y = jnp.where(rows, y, y)",
+        'y = jnp.where(q["rows"], cubic_hermite(y0, y1, q["m0"], q["m1"], w), y)',
+        'y = jnp.where(q["rows"], y, y)',
         "t_eval on a curved contact pressed at both ends: cubic Hermite with the law's rates "
         "(linear velocities: 56x the steps' error)",
         (TBF + "test_t_eval_as_accurate_as_the_steps[bathe]",),

@@ -149,7 +149,16 @@ def second_order_ends(model, t0, y0, t1, y1, args):
     return jax.lax.cond(jnp.any(free), ends, lambda _: (y0, y1), None)
 
 
-def on_second_order_surface(model, t, t0, y0, t1, y1, y, args):
+def second_order_rows(model, t0, y0, t1, y1, args):
+    """The selection rows `on_second_order_surface` corrects in the step from `(t0, y0)`
+    to `(t1, y1)` (held at both ends, no first-order hidden constraint): a quantity of the
+    step, computed once for all the output times inside it."""
+    h = jnp.where(t1 > t0, t1 - t0, 1.0)
+    _, sigma = _maps(model, h, args)
+    return _second_order_rows(model, sigma, t0, y0, t1, y1, args)
+
+
+def on_second_order_surface(model, t, t0, y0, t1, y1, y, args, free=None):
     r"""`y` (the state interpolated at `t` inside the step from `(t0, y0)` to `(t1, y1)`)
     moved onto the surface's first derivative where a second-order sliding mode holds
     at both ends (`second_order_ends`): there $\sigma = \dot\sigma = 0$ along the
@@ -165,10 +174,12 @@ def on_second_order_surface(model, t, t0, y0, t1, y1, y, args):
     $\sigma = 0$ to its order); then the selections take the second-order equivalent
     control at the corrected state (`_second_order_newton`). Kept only where that
     control lies inside its set (the phase holds at `t`) and everything is finite;
-    `y` elsewhere, and on every other row."""
+    `y` elsewhere, and on every other row. `free`: `second_order_rows` of the step, if
+    computed already."""
     h = jnp.where(t1 > t0, t1 - t0, 1.0)
     project, sigma = _maps(model, h, args)
-    free = _second_order_rows(model, sigma, t0, y0, t1, y1, args)
+    if free is None:
+        free = _second_order_rows(model, sigma, t0, y0, t1, y1, args)
 
     def correct(y):
         moved, ok = _onto_first_derivative(model, free, t, y, args)
@@ -337,7 +348,17 @@ def _newton(model, sigma, on, J, t, y, args):
     return jnp.where(on, y - step, y)
 
 
-def selections_inside(model, t, t0, y0, t1, y1, y, args):
+def selection_phases(model, t0, y0, t1, y1, args):
+    """What `selections_inside` reads of the step from `(t0, y0)` to `(t1, y1)` alone
+    (computed once for all the output times inside it): the selection rows held at its
+    start and at its end, and the start of the free flow `_crossed` follows."""
+    h = jnp.where(t1 > t0, t1 - t0, 1.0)
+    _, sigma = _maps(model, h, args)
+    held0, held1 = _held(model, sigma, t0, y0), _held(model, sigma, t1, y1)
+    return held0, held1, _free_start(model, t0, y0, args)
+
+
+def selections_inside(model, t, t0, y0, t1, y1, y, args, phases=None):
     r"""`y` (the state interpolated at `t` inside the step from `(t0, y0)` to `(t1, y1)`,
     `y0` its start as the steppers take it) with every selection row replaced by the
     selection the phase has at `t`, inside its set (the projector's value, the last
@@ -353,10 +374,13 @@ def selections_inside(model, t, t0, y0, t1, y1, y, args):
       flow from the start (second order), changes sign; from there the end's selection,
       or the equivalent control if the end is held (a sliding mode reached inside).
 
-    Equation rows and differential rows are returned unchanged."""
+    Equation rows and differential rows are returned unchanged. `phases`:
+    `selection_phases` of the step, if computed already."""
     h = jnp.where(t1 > t0, t1 - t0, 1.0)
-    project, sigma = _maps(model, h, args)
-    held0, held1 = _held(model, sigma, t0, y0), _held(model, sigma, t1, y1)
+    project, _ = _maps(model, h, args)
+    if phases is None:
+        phases = selection_phases(model, t0, y0, t1, y1, args)
+    held0, held1, start = phases
     # The hidden constraint read with the selection rows' scaling shrunk (G = 0 does not
     # depend on it where nothing clips): a state off the surface by the interpolant's
     # error, or after the phase ends, would clip the stage's resolvent and leave G
@@ -369,21 +393,29 @@ def selections_inside(model, t, t0, y0, t1, y1, y, args):
     eq = project(t, y_eq)
     inside = jnp.abs(eq - y_eq) <= _band(y_eq)
     leaving = jnp.where(inside, eq, y1)
-    crossed = _crossed(model, t, t0, y0, args)
+    crossed = _crossed(model, t, t0, y0, start, args)
     reaching = jnp.where(crossed, jnp.where(held1, eq, y1), y0)
     w = jnp.where(held0, jnp.where(held1, eq, leaving), reaching)
     w = jnp.where(model.selection_rows, w, y)
     return jnp.where(model.selection_rows, project(t, w), y)
 
 
-def _crossed(model, t, t0, y0, args):
-    # Whether each row's f has changed sign between the start and `t` along the free flow
-    # from the start (selections held at the start's), to second order in t - t0.
-    d = t - t0
+def _free_start(model, t0, y0, args):
+    # `(r0, a0, g0)` of the free flow from the start that `_crossed` follows: the rate, its
+    # derivative along the flow (state units) and f there.
     r0 = _rate(model, t0, y0, args)
     a0 = model.to_state(
         jax.jvp(lambda tt, yy: model.f(tt, yy, args), (t0, y0), (jnp.ones_like(t0), r0))[1]
     )
+    return r0, a0, model.f(t0, y0, args)
+
+
+def _crossed(model, t, t0, y0, start, args):
+    # Whether each row's f has changed sign between the start and `t` along the free flow
+    # from the start (selections held at the start's; `start`: `_free_start`), to second
+    # order in t - t0.
+    r0, a0, g0 = start
+    d = t - t0
     y_free = y0 + d * (r0 + 0.5 * d * a0)
-    g0, g = model.f(t0, y0, args), model.f(t, y_free, args)
+    g = model.f(t, y_free, args)
     return jnp.sign(g) != jnp.sign(g0)
