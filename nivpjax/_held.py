@@ -158,7 +158,7 @@ def second_order_rows(model, t0, y0, t1, y1, args):
     return _second_order_rows(model, sigma, t0, y0, t1, y1, args)
 
 
-def on_second_order_surface(model, t, t0, y0, t1, y1, y, args, free=None):
+def on_second_order_surface(model, t, t0, y0, t1, y1, y, args, free):
     r"""`y` (the state interpolated at `t` inside the step from `(t0, y0)` to `(t1, y1)`)
     moved onto the surface's first derivative where a second-order sliding mode holds
     at both ends (`second_order_ends`): there $\sigma = \dot\sigma = 0$ along the
@@ -174,12 +174,9 @@ def on_second_order_surface(model, t, t0, y0, t1, y1, y, args, free=None):
     $\sigma = 0$ to its order); then the selections take the second-order equivalent
     control at the corrected state (`_second_order_newton`). Kept only where that
     control lies inside its set (the phase holds at `t`) and everything is finite;
-    `y` elsewhere, and on every other row. `free`: `second_order_rows` of the step, if
-    computed already."""
+    `y` elsewhere, and on every other row. `free`: `second_order_rows` of the step."""
     h = jnp.where(t1 > t0, t1 - t0, 1.0)
     project, sigma = _maps(model, h, args)
-    if free is None:
-        free = _second_order_rows(model, sigma, t0, y0, t1, y1, args)
 
     def correct(y):
         moved, ok = _onto_first_derivative(model, free, t, y, args)
@@ -358,7 +355,7 @@ def selection_phases(model, t0, y0, t1, y1, args):
     return held0, held1, _free_start(model, t0, y0, args)
 
 
-def selections_inside(model, t, t0, y0, t1, y1, y, args, phases=None):
+def selections_inside(model, t, t0, y0, t1, y1, y, args, phases):
     r"""`y` (the state interpolated at `t` inside the step from `(t0, y0)` to `(t1, y1)`,
     `y0` its start as the steppers take it) with every selection row replaced by the
     selection the phase has at `t`, inside its set (the projector's value, the last
@@ -375,11 +372,9 @@ def selections_inside(model, t, t0, y0, t1, y1, y, args, phases=None):
       or the equivalent control if the end is held (a sliding mode reached inside).
 
     Equation rows and differential rows are returned unchanged. `phases`:
-    `selection_phases` of the step, if computed already."""
+    `selection_phases` of the step."""
     h = jnp.where(t1 > t0, t1 - t0, 1.0)
     project, _ = _maps(model, h, args)
-    if phases is None:
-        phases = selection_phases(model, t0, y0, t1, y1, args)
     held0, held1, start = phases
     # The hidden constraint read with the selection rows' scaling shrunk (G = 0 does not
     # depend on it where nothing clips): a state off the surface by the interpolant's
