@@ -19,7 +19,6 @@ loaded machine the difference of two end-to-end medians is noisy, this column is
 import argparse
 import functools
 import statistics
-import time
 
 import jax
 import jax.numpy as jnp
@@ -30,7 +29,7 @@ from nivpjax._loop import interpolate, interpolate_multipliers
 from nivpjax._model import Model
 from nivpjax._validate import check_mass_matrix
 
-from . import _common  # noqa: F401  (float64)
+from ._common import time_once  # (and float64)
 from .sweeping_teval import PROJECTOR, T1, vector_field
 
 
@@ -99,23 +98,17 @@ def cases():
     }
 
 
-def _timed(fn):
-    t = time.perf_counter()
-    out = jax.block_until_ready(fn())
-    return time.perf_counter() - t, out
-
-
 def measure(label, run, model, args, t1, stepper_name, repeats):
     stepper = STEPPERS[stepper_name]()
     t_eval = jnp.linspace(0.0, t1, N_OUT)
     plain = functools.partial(run, stepper, None)
     with_out = functools.partial(run, stepper, t_eval)
-    c_plain, sol = _timed(plain)
-    c_out, _ = _timed(with_out)
+    c_plain, sol = time_once(plain)
+    c_out, _ = time_once(with_out)
     a, b = [], []
     for _ in range(repeats):
-        a.append(_timed(plain)[0])
-        b.append(_timed(with_out)[0])
+        a.append(time_once(plain)[0])
+        b.append(time_once(with_out)[0])
     t_plain, t_out = statistics.median(a), statistics.median(b)
     # The interpolation alone, on the saved steps of the plain solve.
 
@@ -124,8 +117,10 @@ def measure(label, run, model, args, t1, stepper_name, repeats):
         return y, interpolate_multipliers(sol, t_eval, y, model, args)
 
     inter = jax.jit(outputs)
-    c_inter, _ = _timed(lambda: inter(sol, t_eval, args))
-    t_inter = statistics.median(_timed(lambda: inter(sol, t_eval, args))[0] for _ in range(repeats))
+    c_inter, _ = time_once(lambda: inter(sol, t_eval, args))
+    t_inter = statistics.median(
+        time_once(lambda: inter(sol, t_eval, args))[0] for _ in range(repeats)
+    )
     return dict(
         scene=label,
         stepper=stepper_name,
