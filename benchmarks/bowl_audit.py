@@ -111,13 +111,14 @@ def trajectory(sol):
     )
 
 
-def events(ts, gap, normal, tol):
+def events(ts, gap, normal, tol, rtol):
     """The release and the landing from the steps: the release the end of the last step
-    whose normal reaction is positive before the flight (the first step open by more than
-    1e-2, mid-flight), the landing the first step after it whose gap is within `tol`
-    (atol + rtol R) of the wall."""
+    whose normal reaction exceeds `rtol` times its largest before the flight (the first
+    step open by more than 1e-2, mid-flight; a reaction below that is zero to the
+    tolerance), the landing the first step after it whose gap is within `tol` (atol +
+    rtol R) of the wall."""
     flight = int(np.argmax(gap > 1e-2))
-    pressed = np.nonzero(normal[:flight] > 1e-8 * np.max(normal))[0]
+    pressed = np.nonzero(normal[:flight] > rtol * np.max(normal))[0]
     back = np.nonzero(gap[flight:] <= tol)[0]
     release = float(ts[1:][pressed[-1]]) if pressed.size else np.nan
     landing = float(ts[flight + back[0]]) if back.size else np.nan
@@ -153,7 +154,7 @@ def measure(case, stepper, runner, rtol):
     )
     if case == "thrown":
         pieces = bowl_pieces(x0[2], g, t1)
-        release, landing = events(ts, gap, normal, rtol / 100 + rtol)
+        release, landing = events(ts, gap, normal, rtol / 100 + rtol, rtol)
         row.update(
             release=release,
             landing=landing,

@@ -213,14 +213,35 @@ MUTANTS = [
         "contact_violation_without_late_velocity",
         "events",
         P + "contact.py",
-        "return jnp.max(jnp.maximum(depth, velocity), initial=0.0)",
-        "return jnp.max(depth, initial=0.0)",
+        "return jnp.max(jnp.maximum(judged, velocity), initial=0.0)",
+        "return jnp.max(judged, initial=0.0)",
         "UnilateralContact.violation: a late impact's velocity error (1 + e)|a| dt counts "
         "(measured: a Zeno ball's steps ten times its flights)",
         (
             TEV + "test_zeno_ball_impacts_at_step_boundaries",
             TEV + "test_micro_bounces_do_not_fall_through_the_floor",
         ),
+    ),
+    Mutant(
+        "contact_depth_at_the_states_scale",
+        "events",
+        P + "contact.py",
+        "judged = depth * self._depth_to_state_scale(ctx, dtype)",
+        "judged = depth",
+        "UnilateralContact._depth_to_state_scale: a penetration is charged like an error in "
+        "its gap, atol + rtol R on a bowl (measured at the state's scale, speed included: "
+        "a thrown ball's landing 1.35x that deep with backward Euler at rtol 1e-6)",
+        ("tests/test_curved_contact.py::test_adaptive_error_falls_with_rtol[thrown-be]",),
+    ),
+    Mutant(
+        "policy_without_tolerances",
+        "controllers",
+        C + "policy.py",
+        "return self.rtol, self.atol",
+        "return None",
+        "PolicyController.tolerances: its error test charges contacts and holds stages as "
+        "PID does (an integral policy reproduces PID step for step on a bouncing ball)",
+        ("tests/test_controller_policy.py::test_integral_policy_reproduces_pid",),
     ),
     Mutant(
         "contact_no_lift_off_prediction",

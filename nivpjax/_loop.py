@@ -265,7 +265,7 @@ def _advance(s: _LoopState, model, stepper, controller, t1, args, error_mask, pr
     h_try = jax.lax.stop_gradient(h_try)
     out = stepper.step(model, s.t, h_try, s.y, args)
     y_error = jnp.zeros_like(out.y1) if out.y_error is None else out.y_error
-    violation, next_event = _events(model, stepper, s, h_try, out, args)
+    violation, next_event = _events(model, stepper, s, h_try, out, args, controller.tolerances())
     info = StepInfo(
         t0=s.t,
         h=h_try,
@@ -340,14 +340,15 @@ def _advance(s: _LoopState, model, stepper, controller, t1, args, error_mask, pr
     return new, rows, accept
 
 
-def _events(model, stepper, s, h_try, out, args):
+def _events(model, stepper, s, h_try, out, args, tolerance):
     # `(violation, next_event)` of an attempt for the controller: a constraint crossed
-    # without being enforced, and the predicted time to the next event (held exits
-    # included); none for a stepper that locates events itself.
+    # without being enforced (in the units of `violation_scale` under the controller's
+    # `tolerance`), and the predicted time to the next event (held exits included); none
+    # for a stepper that locates events itself.
     if stepper.locates_events:
         zero = jnp.zeros((), out.y1.dtype)
         return zero, jnp.full((), jnp.inf, out.y1.dtype)
-    violation = model.violation(s.t + h_try, h_try, s.y, out.y1, args)
+    violation = model.violation(s.t + h_try, h_try, s.y, out.y1, args, tolerance)
     next_event = model.next_event(s.t + h_try, h_try, s.y, out.y1, args)
     exit_violation, exit_time = model.held_exit(s.t + h_try, h_try, s.y, out.y1, args)
     return jnp.maximum(violation, exit_violation), jnp.minimum(next_event, exit_time)

@@ -690,15 +690,17 @@ class Model(eqx.Module):
             end_rate=end_rate,
         )
 
-    def violation(self, t1, h, y0, y1, args):
+    def violation(self, t1, h, y0, y1, args, tolerance=None):
         """Constraint violation at the end of a step (see `AbstractProjector.violation`).
-        The context carries the vector field at the end point (`rate`) and the rates of
-        the differential rows at both ends (`start_rate`, `end_rate`, state units)."""
+        The context carries the vector field at the end point (`rate`), the rates of the
+        differential rows at both ends (`start_rate`, `end_rate`, state units) and the
+        judging controller's `(rtol, atol)` (`tolerance`, or `None`)."""
         rate = self.f(t1, y1, args)
         start_rate = jax.lax.stop_gradient(self._rate(t1 - h, y0, args))
         ctx = self._context(
             t1, h, y0, y1, args, rate=rate, start_rate=start_rate, end_rate=self.to_state(rate)
         )
+        ctx = eqx.tree_at(lambda c: c.tolerance, ctx, tolerance, is_leaf=lambda x: x is None)
         return self.projector.violation(ctx)
 
     def held_exit(self, t1, h, y0, y1, args):

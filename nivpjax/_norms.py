@@ -21,3 +21,11 @@ def scaled_rms_norm(
         return jnp.sqrt(jnp.mean(ratio**2))
     count = jnp.maximum(jnp.sum(mask), 1)
     return jnp.sqrt(jnp.sum(jnp.where(mask, ratio**2, 0.0)) / count)
+
+
+def violation_scale(rtol, atol, y0: Float[Array, " n"]) -> Float[Array, ""]:
+    r"""The size a step's constraint violation (`StepInfo.violation`, state units) is
+    charged against: $\text{atol} + \text{rtol}\,\|y_0\|_\infty$, the start state's scale.
+    A projector whose violation has a natural scale of its own (a contact's penetration,
+    judged like an error in its gap) converts it to this one (`ProjectionContext.tolerance`)."""
+    return atol + rtol * jnp.max(jnp.abs(y0), initial=0.0)

@@ -6,7 +6,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._custom_types import FloatScalar, plain_int, runtime_float
-from .._norms import scaled_rms_norm
+from .._norms import scaled_rms_norm, violation_scale
 from .._results import RESULTS
 from .base import AbstractController, StepInfo, check_step_factors
 from .events import event_margin, land_before_event
@@ -150,7 +150,7 @@ class PIDController(AbstractController):
         prev, prev_prev, rejected_before = state
         err = scaled_rms_norm(info.y_error, info.y0, info.y1, self.rtol, self.atol, info.error_mask)
         # A constraint crossed inside the step counts as error, scaled like the state.
-        scale = self.atol + self.rtol * jnp.max(jnp.abs(info.y0), initial=0.0)
+        scale = violation_scale(self.rtol, self.atol, info.y0)
         err = jnp.maximum(err, info.violation / scale)
         ok = info.stats.nonlinear_result == RESULTS.successful
         finite = jnp.all(jnp.isfinite(info.y1)) & jnp.isfinite(err)

@@ -10,7 +10,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float
 
-from .._norms import scaled_rms_norm
+from .._norms import scaled_rms_norm, violation_scale
 from .._results import RESULTS
 from .base import AbstractController, StepInfo, check_step_factors
 from .events import event_margin, land_before_event
@@ -109,6 +109,11 @@ class PolicyController(AbstractController):
             return StepFeatures(rtol=self.rtol, atol=self.atol)
         return self.features
 
+    def tolerances(self):
+        # The error test's tolerances (and the features'): stage solves held below them,
+        # a contact's penetration charged like an error in its gap, as under PID.
+        return self.rtol, self.atol
+
     @property
     def needs_error_estimate(self) -> bool:
         return True
@@ -135,7 +140,7 @@ class PolicyController(AbstractController):
         """The scaled error norm of the error test (the violation counted as error), and
         whether the attempt is usable (nonlinear solve succeeded, everything finite)."""
         err = scaled_rms_norm(info.y_error, info.y0, info.y1, self.rtol, self.atol, info.error_mask)
-        scale = self.atol + self.rtol * jnp.max(jnp.abs(info.y0), initial=0.0)
+        scale = violation_scale(self.rtol, self.atol, info.y0)
         err = jnp.maximum(err, info.violation / scale)
         ok = info.stats.nonlinear_result == RESULTS.successful
         ok = ok & jnp.all(jnp.isfinite(info.y1)) & jnp.isfinite(err)

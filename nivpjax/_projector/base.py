@@ -52,6 +52,11 @@ class ProjectionContext(eqx.Module):
       with impulses then keeps only its persistent contacts: an impact at that point
       is no smooth reaction (its holding part would be read as a force that the
       impact's flight never has).
+    - `tolerance`: `(rtol, atol)` of the controller that judges a step's `violation`
+      (`None` elsewhere, and under a controller without tolerances). The violation is
+      charged against `nivpjax._norms.violation_scale`, the start
+      state's scale; a projector whose violation has a scale of its own converts it with
+      these (a contact's penetration is judged like an error in its gap).
     """
 
     t: Float[Array, ""]
@@ -67,6 +72,7 @@ class ProjectionContext(eqx.Module):
     end_rate: Float[Array, " n"] | None = None
     tangent: bool = eqx.field(static=True, default=False)
     law: bool = eqx.field(static=True, default=False)
+    tolerance: tuple[Any, Any] | None = None
 
     def restrict(self, v):
         """The components of a full-state vector `v` that belong to this block."""

@@ -90,6 +90,7 @@ class BlockProjector(AbstractProjector):
             end_rate=ctx.end_rate,
             tangent=ctx.tangent,
             law=ctx.law,
+            tolerance=ctx.tolerance,
         )
 
     def violation(self, ctx: ProjectionContext):

@@ -8,6 +8,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._norms import violation_scale
 from .base import AbstractProjector, Bound, ProjectionContext, resolve
 from .lcp import lcp_solve
 from .predict import first_root, secant_crossing
@@ -214,7 +215,35 @@ class UnilateralContact(AbstractProjector):
         approaching = (u1 < -self._roundoff_velocity(u1)) & (depth > tiny)
         late = depth / jnp.where(approaching, -u1, 1.0)
         velocity = jnp.where(approaching, (1 + e) * jnp.abs(a1) * late, 0.0)
-        return jnp.max(jnp.maximum(depth, velocity), initial=0.0)
+        judged = depth * self._depth_to_state_scale(ctx, dtype)
+        return jnp.max(jnp.maximum(judged, velocity), initial=0.0)
+
+    def _depth_to_state_scale(self, ctx: ProjectionContext, dtype):
+        r"""Per contact, the factor that charges a penetration like an error in its gap:
+        $s / b$, with $s$ the scale the controller charges a violation against
+        (`violation_scale`, the start state's: $\text{atol} + \text{rtol}\,\|y_0\|_\infty$)
+        and $b = \big(\sum_i (\partial_i g\, s_i)^2\big)^{1/2}$, $s_i = \text{atol} +
+        \text{rtol} \max(|y_{0,i}|, |y_{1,i}|)$, the error norm's tolerance carried to
+        the gap: the change of the gap that errors at tolerance in the components make.
+        A gap with a unit gradient in the positions $q$ (a wall, a sphere) has
+        $b \le \text{atol} + \text{rtol}\,\|q\|_2$ (Minkowski): $\text{atol} +
+        \text{rtol}\,R$ on a ball in a bowl of radius $R$, where the state's scale
+        would include the speed. A gap in other units than the positions is judged in
+        its own. 1 without a tolerance (`ctx.tolerance`) or where the gap reads no row."""
+        if ctx.tolerance is None:
+            return jnp.ones((), dtype)
+        rtol, atol = ctx.tolerance
+        y0, y1 = ctx.y_prev, ctx.y_iter
+
+        def gap(y):
+            return jnp.atleast_1d(jnp.asarray(self.gap(ctx.t, y, ctx.args), dtype))
+
+        rows = atol + rtol * jnp.maximum(jnp.abs(y0), jnp.abs(y1))
+        rows = jnp.broadcast_to(rows, y1.shape).astype(dtype)
+        band = jnp.sqrt(jnp.sum((jax.jacrev(gap)(y1) * rows) ** 2, axis=-1))
+        scale = violation_scale(rtol, atol, y0).astype(dtype)
+        factor = jnp.where(band > 0, scale / jnp.where(band > 0, band, 1.0), 1.0)
+        return jax.lax.stop_gradient(factor)
 
     def next_event(self, ctx: ProjectionContext):
         r"""The first closing of a contact after the start of the attempt, from the gap's
