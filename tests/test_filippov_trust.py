@@ -20,7 +20,7 @@ import nivpjax as nj
 
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "examples"))
-from _references_switching import forced_relay_exact  # noqa: E402
+from _references_switching import forced_relay_exact, super_twisting_reference  # noqa: E402
 
 
 STEPPERS = {
@@ -180,6 +180,37 @@ def test_second_order_sliding_is_not_checked_as_first_order(name):
     assert sol.result == nj.RESULTS.successful
     x = np.asarray(sol.y_final)
     assert abs(x[1] + 3.0 * x[0]) <= 1e-2  # on the sliding surface at the end
+
+
+@pytest.mark.parametrize("rtol", [1e-3, 1e-4])
+def test_trapezoidal_starts_second_order_sliding_on_its_surface(rtol):
+    # After the finite-time convergence (sigma = 0 held), each step starts on the
+    # second-order surface with its equivalent control (`_held.held_start`). Before, the
+    # trapezoidal rule kept the stage's w, w_1 = 2 w_bar - w_0 rang between 0.45 and -0.99
+    # with sigma' at +-3e-5, and the steps fell to 1e-5 until max_steps (50 000 at rtol
+    # 1e-3, t = 2.08 of 5). Now: successful in a few hundred steps, w smooth (no step
+    # changes it by more than 0.2 after t = 2), the error within the campaign's bound
+    # 5 rtol^(1/2) against the event-driven reference.
+    scene, x0, args = nj.scenes.super_twisting(c=3.0, lipschitz=5.0)
+    controller = nj.PIDController(rtol=rtol, atol=rtol / 100)
+    sol = scene.solve(
+        0.0,
+        5.0,
+        x0,
+        args,
+        stepper=nj.Trapezoidal(),
+        controller=controller,
+        max_steps=4000,
+        throw=False,
+    )
+    assert sol.result == nj.RESULTS.successful
+    k = int(sol.n_accepted)
+    ts, ys = np.asarray(sol.ts[: k + 1]), np.asarray(sol.ys[: k + 1])
+    w = ys[:, 3]
+    assert np.max(np.abs(np.diff(w[ts > 2.0]))) < 0.2
+    a = {key: float(value) for key, value in args.items()}
+    reference = super_twisting_reference(np.asarray(x0), a["k1"], a["k2"], a["c"], ts)[0]
+    assert np.max(np.abs(ys[:, :3] - reference)) < 5 * rtol**0.5
 
 
 def test_held_step_sees_an_excursion_of_the_equivalent_control_between_its_ends():
