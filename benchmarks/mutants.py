@@ -255,6 +255,20 @@ MUTANTS = [
         (TBF + "test_t_eval_as_accurate_as_the_steps[bathe-ellipse_slide]",),
     ),
     Mutant(
+        "second_order_sliding_start_off_its_surface",
+        "events",
+        "nivpjax/_held.py",
+        "y_eq = on_second_order_surface(model, t0, t0, y_eq, t0 + h, y_eq, y_eq, args, near)",
+        "y_eq = y_eq",
+        "held_start: a step in a second-order sliding mode starts on the surface's first "
+        "derivative with the second-order equivalent control (the trapezoidal rule's w "
+        "rang from the stage's value: max_steps on super-twisting at rtol 1e-3)",
+        (
+            "tests/test_filippov_trust.py::"
+            "test_trapezoidal_starts_second_order_sliding_on_its_surface",
+        ),
+    ),
+    Mutant(
         "contact_no_lift_off_prediction",
         "events",
         P + "contact.py",
