@@ -132,20 +132,11 @@ def _on_second_order_surface_within(model, sigma, rows, t0, h, y, args):
     of the surface while the state twists toward it ($\dot\sigma$ = 0.27 there) is not
     within reach: the guard follows the step the error control chose."""
     y = jax.lax.stop_gradient(y)
-    one = jnp.ones_like(t0)
-
-    def rate(tt, yy):
-        return jnp.where(model.algebraic, 0.0, _rate(model, tt, yy, args))
-
-    def first(tt, yy):
-        return jax.jvp(sigma, (tt, yy), (one, rate(tt, yy)))[1]
-
-    def second(yy):
-        return jax.jvp(first, (t0, yy), (one, rate(t0, yy)))[1]
+    first, second = _along_the_flow(model, sigma, t0, args)
 
     def within(_):
         reach = jnp.sum(jnp.abs(jnp.where(rows[None, :], jax.jacfwd(second)(y), 0.0)), axis=1)
-        return rows & (jnp.abs(first(t0, y)) <= h * reach)
+        return rows & (jnp.abs(first(y)) <= h * reach)
 
     return jax.lax.cond(jnp.any(rows), within, lambda _: rows, None)
 
@@ -281,21 +272,28 @@ def _second_order_rows(model, sigma, t0, y0, t1, y1, args):
     return held & ~on
 
 
-def _second_order_newton(model, sigma, rows, t, y, args):
-    # One Newton step on the second derivative of sigma along the flow (selections held:
-    # their rate taken 0) over `rows`, from `y`; the result where finite, else `y`.
-    y = jax.lax.stop_gradient(y)
+def _along_the_flow(model, sigma, t, args):
+    # `(first, second)`: the first and second derivatives of sigma along the flow at time
+    # `t` as functions of the state, the selections held (their rate taken 0).
     one = jnp.ones_like(t)
 
     def rate(tt, yy):
         return jnp.where(model.algebraic, 0.0, _rate(model, tt, yy, args))
 
-    def first(tt, yy):
+    def first_at(tt, yy):
         return jax.jvp(sigma, (tt, yy), (one, rate(tt, yy)))[1]
 
     def second(yy):
-        return jax.jvp(first, (t, yy), (one, rate(t, yy)))[1]
+        return jax.jvp(first_at, (t, yy), (one, rate(t, yy)))[1]
 
+    return (lambda yy: first_at(t, yy)), second
+
+
+def _second_order_newton(model, sigma, rows, t, y, args):
+    # One Newton step on the second derivative of sigma along the flow (selections held:
+    # their rate taken 0) over `rows`, from `y`; the result where finite, else `y`.
+    y = jax.lax.stop_gradient(y)
+    _, second = _along_the_flow(model, sigma, t, args)
     J = jax.jacfwd(second)(y)
     pair = rows[:, None] & rows[None, :]
     eye = jnp.eye(y.shape[0], dtype=y.dtype)
