@@ -102,7 +102,10 @@ def held_start(model, t0, h, y0, args):
     (measured on a forced relay: `max_steps` exhausted at rtol 1e-5). With the equivalent
     control at the start, $w_1 = u_1$. Where the equivalent control lies outside the set
     (the phase ends at $t_0$: the flow leaves the constraint), its projection is the
-    selection of the side the flow goes to."""
+    selection of the side the flow goes to. A held row that no first-order constraint
+    determines (a second-order sliding mode) starts on the surface's first derivative with
+    its second-order equivalent control, where the step can reach it
+    (`_on_second_order_surface_within`)."""
     project, sigma = _maps(model, h, args)
     held = _held(model, sigma, t0, y0)
 
