@@ -673,7 +673,19 @@ class Model(eqx.Module):
             return None
         return jax.lax.stop_gradient(self._rate(t - h, y0, args))
 
-    def _context(self, t, h, y0, y1, args, rate=None, rate_at=None, start_rate=None, end_rate=None):
+    def _context(
+        self,
+        t,
+        h,
+        y0,
+        y1,
+        args,
+        rate=None,
+        rate_at=None,
+        start_rate=None,
+        end_rate=None,
+        tolerance=None,
+    ):
         rho = jnp.full_like(y1, h)
         if start_rate is None:
             start_rate = self._start_rate(t, h, y0, args)
@@ -688,6 +700,7 @@ class Model(eqx.Module):
             rate_at=rate_at,
             start_rate=start_rate,
             end_rate=end_rate,
+            tolerance=tolerance,
         )
 
     def violation(self, t1, h, y0, y1, args, tolerance=None):
@@ -697,10 +710,10 @@ class Model(eqx.Module):
         judging controller's `(rtol, atol)` (`tolerance`, or `None`)."""
         rate = self.f(t1, y1, args)
         start_rate = jax.lax.stop_gradient(self._rate(t1 - h, y0, args))
+        end_rate = self.to_state(rate)
         ctx = self._context(
-            t1, h, y0, y1, args, rate=rate, start_rate=start_rate, end_rate=self.to_state(rate)
+            t1, h, y0, y1, args, rate, start_rate=start_rate, end_rate=end_rate, tolerance=tolerance
         )
-        ctx = eqx.tree_at(lambda c: c.tolerance, ctx, tolerance, is_leaf=lambda x: x is None)
         return self.projector.violation(ctx)
 
     def held_exit(self, t1, h, y0, y1, args):

@@ -8,7 +8,7 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from .._norms import scaled_rms_norm
+from .._norms import scaled_rms_norm, violation_scale
 from .._results import RESULTS
 from .base import StepInfo
 
@@ -110,7 +110,7 @@ class StepFeatures(AbstractFeatures):
         span = jnp.where(memory.span > 0, memory.span, 1.0)
         h = info.h
         h_safe = jnp.where(h > 0, h, span)
-        scale = self.atol + self.rtol * jnp.max(jnp.abs(info.y0), initial=0.0)
+        scale = violation_scale(self.rtol, self.atol, info.y0)
         ok = info.stats.nonlinear_result == RESULTS.successful
         y1 = jnp.where(jnp.isfinite(info.y1), info.y1, info.y0)
         moved = scaled_rms_norm(y1 - info.y0, info.y0, y1, self.rtol, self.atol, info.error_mask)
