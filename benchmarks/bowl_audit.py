@@ -68,19 +68,15 @@ def _args(g):
     return dict(ARGS, g=jnp.asarray(g))
 
 
+def _solve(stepper, x0, g, t1, **kw):
+    return SCENE.solve(0.0, t1, x0, _args(g), stepper=STEPPERS[stepper](), **kw)
+
+
 def adaptive_runner(stepper):
     @jax.jit
     def run(x0, g, t1, rtol):
         controller = nj.PIDController(rtol=rtol, atol=rtol / 100)
-        return SCENE.solve(
-            0.0,
-            t1,
-            x0,
-            _args(g),
-            stepper=STEPPERS[stepper](),
-            controller=controller,
-            max_steps=MAX_STEPS,
-        )
+        return _solve(stepper, x0, g, t1, controller=controller, max_steps=MAX_STEPS)
 
     return run
 
@@ -88,16 +84,8 @@ def adaptive_runner(stepper):
 def fixed_runner(stepper):
     @jax.jit
     def run(x0, g, t1, h):
-        return SCENE.solve(
-            0.0,
-            t1,
-            x0,
-            _args(g),
-            stepper=STEPPERS[stepper](),
-            controller=nj.ConstantStepSize(),
-            h0=h,
-            max_steps=1024,
-        )
+        controller = nj.ConstantStepSize()
+        return _solve(stepper, x0, g, t1, controller=controller, h0=h, max_steps=1024)
 
     return run
 

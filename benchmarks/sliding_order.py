@@ -85,20 +85,23 @@ def _error(name, sol):
     return float(np.max(np.abs(xs[:, :2] - exact(name, ts)))), k
 
 
+def _solve(name, stepper, smooth, t1, **kw):
+    # The problem through `Friction` (its scene) or with the law in f (`smooth`).
+    scene, field, x0, _ = PROBLEMS[name]
+    kw["stepper"] = STEPPERS[stepper]()
+    if smooth:
+        return nj.solve(field, 0.0, t1, jnp.asarray(x0), **kw)
+    return scene.solve(0.0, t1, jnp.asarray(x0), **kw)
+
+
 def adaptive(name, stepper, smooth):
     """`run(rtol) -> (error, accepted steps)`, one compile per configuration."""
-    scene, field, x0, T = PROBLEMS[name]
+    T = PROBLEMS[name][3]
 
     @jax.jit
     def run(rtol):
-        kw = dict(
-            stepper=STEPPERS[stepper](),
-            controller=nj.PIDController(rtol=rtol, atol=rtol / 100),
-            max_steps=100_000,
-        )
-        if smooth:
-            return nj.solve(field, 0.0, T, jnp.asarray(x0), **kw)
-        return scene.solve(0.0, T, jnp.asarray(x0), **kw)
+        controller = nj.PIDController(rtol=rtol, atol=rtol / 100)
+        return _solve(name, stepper, smooth, T, controller=controller, max_steps=100_000)
 
     def measure(rtol):
         sol = run(jnp.asarray(rtol))
@@ -110,15 +113,11 @@ def adaptive(name, stepper, smooth):
 
 def fixed(stepper, smooth, hs=(0.04, 0.02, 0.01, 0.005)):
     """Errors on the disk over [0, 4] at fixed steps, and the observed orders."""
-    scene, field, x0, _ = PROBLEMS["disk"]
 
     @jax.jit
     def run(h):
-        kw = dict(stepper=STEPPERS[stepper](), controller=nj.ConstantStepSize(), h0=h)
-        kw["max_steps"] = 1024
-        if smooth:
-            return nj.solve(field, 0.0, 4.0, jnp.asarray(x0), **kw)
-        return scene.solve(0.0, 4.0, jnp.asarray(x0), **kw)
+        controller = nj.ConstantStepSize()
+        return _solve("disk", stepper, smooth, 4.0, controller=controller, h0=h, max_steps=1024)
 
     errors = [_error("disk", run(jnp.asarray(h)))[0] for h in hs]
     return errors, np.log2(np.array(errors[:-1]) / np.array(errors[1:]))
