@@ -34,6 +34,15 @@ def test_es_gradient_quadratic():
         np.testing.assert_allclose(e, x, atol=0.05 * scale)
     # And it is not trivially close: a wrong sign or scale would fail.
     assert float(jnp.abs(exact["b"])) > 0.1 * scale
+    # With the centre: the same estimate (the same draws), and L(theta) appended.
+    est_c, losses_c = learn.es_gradient(
+        loss, theta, jr.PRNGKey(0), pairs=20, sigma=0.1, centre=True
+    )
+    est_20, _ = learn.es_gradient(loss, theta, jr.PRNGKey(0), pairs=20, sigma=0.1)
+    assert losses_c.shape == (41,)
+    np.testing.assert_allclose(losses_c[-1], loss(theta), rtol=1e-12)
+    for a, b in zip(jax.tree.leaves(est_c), jax.tree.leaves(est_20)):
+        np.testing.assert_allclose(a, b, rtol=1e-12)
 
 
 def test_short_training_improves_objective():

@@ -12,7 +12,9 @@ from jax.flatten_util import ravel_pytree
 from ._env import EnvParams, StepSizeEnv
 
 
-def es_gradient(loss: Callable, params, key, *, pairs: int = 8, sigma: float = 0.05):
+def es_gradient(
+    loss: Callable, params, key, *, pairs: int = 8, sigma: float = 0.05, centre: bool = False
+):
     r"""Antithetic evolution-strategies estimate of $\nabla_\theta \mathbb{E}[L]$ of a
     Gaussian smoothing of `loss`:
 
@@ -24,15 +26,19 @@ def es_gradient(loss: Callable, params, key, *, pairs: int = 8, sigma: float = 0
     the discreteness of accept/reject. Exact in expectation for quadratics.
 
     **Arguments:** `loss` (`params -> scalar`, vmappable), `params` (a pytree of float
-    arrays), `key`, `pairs` $P$, `sigma` $\sigma$.
+    arrays), `key`, `pairs` $P$, `sigma` $\sigma$, `centre`: also evaluate $L(\theta)$,
+    in the same `vmap` (one program holds one copy of `loss`, not two; a training step
+    wants the value it descends from).
 
-    **Returns:** `(g, losses)`: the estimate (shaped like `params`) and the $2P$ losses.
+    **Returns:** `(g, losses)`: the estimate (shaped like `params`) and the $2P$ losses,
+    with $L(\theta)$ appended as a last, $(2P + 1)$-th, where `centre`.
     """
     flat, unravel = ravel_pytree(params)
     eps = jr.normal(key, (pairs, flat.shape[0]), flat.dtype)
-    thetas = jnp.concatenate([flat + sigma * eps, flat - sigma * eps])
+    thetas = [flat + sigma * eps, flat - sigma * eps] + ([flat[None]] if centre else [])
+    thetas = jnp.concatenate(thetas)
     losses = jax.vmap(lambda th: loss(unravel(th)))(thetas)
-    diff = losses[:pairs] - losses[pairs:]
+    diff = losses[:pairs] - losses[pairs : 2 * pairs]
     g = jnp.einsum("p,pd->d", diff, eps) / (2 * sigma * pairs)
     return unravel(g), losses
 

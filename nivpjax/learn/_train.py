@@ -177,8 +177,8 @@ def _es_step(task, objective, optimiser, static, pairs, sigma):
     @filter_jit
     def step(params, opt_state, key, x0, args, y_ref):
         loss = lambda p: batch_cost(p, x0, args, y_ref)
-        grads, _ = es_gradient(loss, params, key, pairs=pairs, sigma=sigma)
-        value = loss(params)
+        grads, losses = es_gradient(loss, params, key, pairs=pairs, sigma=sigma, centre=True)
+        value = losses[-1]
         updates, opt_state = optimiser.update(grads, opt_state, params)
         return optax.apply_updates(params, updates), opt_state, value
 
