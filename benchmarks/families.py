@@ -64,6 +64,7 @@ from _references_mechanics import (  # noqa: E402
     ellipse_bowl_state,
     ellipse_friction_bowl_state,
     friction_bowl_state,
+    pushed_block_state,
     slider_event_driven,
 )
 from _references_switching import (  # noqa: E402
@@ -286,6 +287,95 @@ BLOCK_CONE = Family(
     2.0,
     _cone_error,
     2.0,
+)
+
+
+# --- Smooth sliding (issue 32): friction through a projector in a phase with no event. --
+# The speed stays away from zero on every grid point (the references raise otherwise), so
+# the exact motion is a smooth ODE and the rule's full rate applies: the reaction must be
+# integrated at the stepper's order. C = 5 by the second class (set before the first run):
+# nothing resets an error, the position integrates the velocity's over the whole run.
+
+
+def _pushed_make(cone):
+    def make(p):
+        return nj.scenes.block_on_plane(
+            mu=p["mu"], velocity=(p["vx"], p["vy"]), cone=cone, push=(p["A"], p["omega"])
+        )
+
+    return make
+
+
+def _pushed_error(cone):
+    def error(p, ts, xs):
+        pos, vel, _ = pushed_block_state(ts, (p["vx"], p["vy"]), p["mu"], 9.81, p["A"], p["omega"])
+        if not cone:
+            return _max_error(xs, np.concatenate([pos, vel], axis=-1))
+        zero = np.zeros((len(ts), 1))
+        return _max_error(xs, np.concatenate([pos, zero, vel, zero], axis=-1))
+
+    return error
+
+
+_PUSHED_GRID = (  # the first is issue 32's disk problem (mu g = 1)
+    {"mu": 1 / 9.81, "vx": 0.5, "vy": 0.3, "A": 1.5, "omega": 2.0},
+    {"mu": 0.1, "vx": 1.0, "vy": -0.5, "A": 1.5, "omega": 1.0},
+    {"mu": 0.15, "vx": 0.3, "vy": 0.8, "A": 2.0, "omega": 3.0},
+)
+PUSHED_DISK = Family(
+    "pushed_disk",
+    "Friction (disk), smooth slip",
+    "Block pushed by a rotating force, disk friction, slipping throughout",
+    _pushed_make(False),
+    _PUSHED_GRID,
+    8.0,
+    _pushed_error(False),
+    5.0,
+)
+PUSHED_CONE = Family(
+    "pushed_cone",
+    "SetValued (second-order cone), smooth slip",
+    "Block pushed by a rotating force, contact and friction in one cone, slipping throughout",
+    _pushed_make(True),
+    _PUSHED_GRID,
+    8.0,
+    _pushed_error(True),
+    5.0,
+)
+
+
+def _slip_make(p):
+    return nj.scenes.spring_slider(
+        damping=p["c"],
+        mu_static=p["mu_s"],
+        mu_kinetic=p["mu_k"],
+        slip_scale=p["Dc"],
+        drive_velocity=p["V"],
+        velocity=p["v0"],
+        position=p["s0"],
+    )
+
+
+def _slip_error(p, ts, xs):
+    _, _, args = _slip_make(p)
+    s, v, switches = slider_event_driven(_floats(args), p["s0"], p["v0"], 10.0, ts)
+    if len(switches) != 1:
+        raise ValueError(f"the slider does not slip throughout: {switches}")
+    return _max_error(xs, np.stack([s, v], axis=-1))
+
+
+SLIDER_SLIP = Family(
+    "slider_slip",
+    "Friction, slip-weakening bound, smooth slip",
+    "Driven spring-slider in continuous slip, slip-weakening friction (no stick)",
+    _slip_make,
+    (
+        {"c": 0.0, "mu_s": 0.6, "mu_k": 0.4, "Dc": 0.5, "V": 1.0, "v0": 1.5, "s0": 0.0},
+        {"c": 0.1, "mu_s": 0.7, "mu_k": 0.3, "Dc": 0.3, "V": 2.0, "v0": 2.0, "s0": 0.5},
+    ),
+    10.0,
+    _slip_error,
+    5.0,
 )
 
 
@@ -536,6 +626,9 @@ FAMILIES = {
         BALL,
         BLOCK_INTERVAL,
         BLOCK_CONE,
+        PUSHED_DISK,
+        PUSHED_CONE,
+        SLIDER_SLIP,
         _rectifier_family("rectifier", False),
         _rectifier_family("diode_bridge", True),
         CHUA,

@@ -207,6 +207,44 @@ def block_state(t, velocity, mu, g):
     return p, v, t_stop
 
 
+def pushed_block_state(t, velocity, mu, g, amp, omega):
+    """Position and velocity (2-D) of the block pushed by $F = A(\\cos\\omega t,
+    \\sin\\omega t)$ while it slips: $p' = v$, $v' = F - \\mu g\\,v/|v|$, from the origin,
+    DOP853 at rtol 1e-13. Valid while the speed stays positive: a stop is an event, and a
+    run that reaches one raises (the family's grid keeps the block slipping).
+
+    **Returns:** `(p, v, min_speed)`, `p`, `v` of shape `t.shape + (2,)`, and the least
+    speed over `[0, max(t)]`."""
+    t = np.asarray(t, dtype=float)
+    t_end = max(float(t.max()), 1e-12)
+
+    def rhs(s, z):
+        v = z[2:]
+        force = amp * np.array([np.cos(omega * s), np.sin(omega * s)])
+        return np.concatenate([v, force - mu * g * v / np.hypot(*v)])
+
+    def stop(s, z):
+        return np.hypot(*z[2:]) - 1e-3
+
+    stop.terminal = True
+    z0 = [0.0, 0.0, float(velocity[0]), float(velocity[1])]
+    sol = solve_ivp(
+        rhs,
+        (0.0, t_end),
+        z0,
+        events=stop,
+        method="DOP853",
+        rtol=1e-13,
+        atol=1e-14,
+        dense_output=True,
+    )
+    if sol.t_events[0].size:
+        raise ValueError(f"the pushed block stops near t = {sol.t_events[0][0]:.4g}")
+    z = sol.sol(t.ravel()).T.reshape(t.shape + (4,))
+    fine = sol.sol(np.linspace(0.0, t_end, 4001))
+    return z[..., :2], z[..., 2:], float(np.min(np.hypot(*fine[2:])))
+
+
 # ----------------------------------------------------------------------------------------------
 # Ball stack: a dropped column with equal spacing and plastic impacts.
 

@@ -203,10 +203,15 @@ def chua(alpha=15.6, beta=28.0, m0=-1.143, m1=-0.714, x0=(0.7, 0.0, 0.0)):
     return scene, _f(list(x0)), args
 
 
-def block_on_plane(mu=0.3, gravity=9.81, velocity=(2.0, 1.0), cone=False):
+def block_on_plane(mu=0.3, gravity=9.81, velocity=(2.0, 1.0), cone=False, push=None):
     r"""A block sliding on a horizontal plane with isotropic Coulomb friction, sliding to
     rest along a straight line: $|v|$ decreases at the rate $\mu g$, it stops at
     $t^* = |v_0|/(\mu g)$ after a distance $|v_0|^2/(2\mu g)$.
+
+    `push=(A, omega)` adds a rotating horizontal force per unit mass
+    $F(t) = A(\cos\omega t, \sin\omega t)$ (`args["A"]`, `args["omega"]`): the block then
+    slides along a curve, $v_t' = F(t) - \mu g\,v_t/|v_t|$ while $v_t \ne 0$, a smooth ODE
+    when the speed stays away from zero (the reaction's direction turns with the velocity).
 
     `cone=False`: 2-D disk friction on $x = (p_x, p_y, v_x, v_y)$ (no extra states).
     `cone=True`: 3-D frictional contact with the normal direction resolved, on
@@ -216,18 +221,27 @@ def block_on_plane(mu=0.3, gravity=9.81, velocity=(2.0, 1.0), cone=False):
     $(v_n + \mu|v_t|, v_t) \in K_\mu^*$ (multiplier `"lam"`).
     """
     args = {"mu": _f(mu), "g": _f(gravity)}
+    if push is not None:
+        args.update(A=_f(push[0]), omega=_f(push[1]))
+
+    def force(t, a, dtype):
+        if push is None:
+            return jnp.zeros(2, dtype)
+        angle = a["omega"] * t
+        return a["A"] * jnp.stack([jnp.cos(angle), jnp.sin(angle)]).astype(dtype)
+
     if not cone:
 
         def dynamics(t, x, a, m):
-            return jnp.concatenate([x[2:], jnp.zeros(2, x.dtype)])
+            return jnp.concatenate([x[2:], force(t, a, x.dtype)])
 
         friction = Friction([2, 3], lambda t, x, a: a["mu"] * a["g"], isotropic=True)
         return Scene(dynamics, 4, (friction,)), _f([0.0, 0.0, *velocity]), args
 
     def dynamics(t, x, a, m):
-        lam = m["lam"]
-        force = jnp.stack([lam[1], lam[2], lam[0] - a["g"]])
-        return jnp.concatenate([x[3:], force])
+        lam, push_t = m["lam"], force(t, a, x.dtype)
+        total = jnp.stack([lam[1] + push_t[0], lam[2] + push_t[1], lam[0] - a["g"]])
+        return jnp.concatenate([x[3:], total])
 
     def modified_velocity(t, x, lam, a):
         vt, vn = x[3:5], x[5]
