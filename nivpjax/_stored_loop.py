@@ -175,6 +175,7 @@ class _Linearised:
                 self.res_avals.append(v.aval)
         self.closed = closed
         self.stored_bytes = sum(a.size * a.dtype.itemsize for a in self.res_avals)
+        self.packing = _Packing(self.res_avals)
 
     def _split_step(self, consts, leaves):
         # (x, c) -> ((new float leaves, float rows), (other new leaves, other rows, index,
@@ -208,7 +209,7 @@ class _Linearised:
     def empty(self, max_steps):
         # Each iteration's row index and predicate, then its stored residuals.
         first = [jnp.zeros((max_steps,), jnp.int32), jnp.zeros((max_steps,), bool)]
-        return first + [jnp.zeros((max_steps,) + a.shape, a.dtype) for a in self.res_avals]
+        return first + self.packing.empty(max_steps)
 
     def step(self, consts, state):
         """The step and the residuals of its VJP that must be stored."""
@@ -216,10 +217,11 @@ class _Linearised:
         out = fun(*consts, *jax.tree.leaves(state))
         new, rows, index, pred, residuals = jax.tree.unflatten(self.out_tree, out)
         stored = [r for r, (kind, _) in zip(residuals, self.res_source) if kind == "stored"]
-        return new, rows, index, pred, [index, pred, *stored]
+        return new, rows, index, pred, [index, pred, *self.packing.pack(stored)]
 
     def vjp_from_residuals(self, stored, k):
-        index, pred, *stored = [lax.dynamic_index_in_dim(s, k, keepdims=False) for s in stored]
+        index, pred, *rows = [lax.dynamic_index_in_dim(s, k, keepdims=False) for s in stored]
+        stored = self.packing.unpack(rows)
         residuals = []
         for kind, where in self.res_source:
             if kind == "stored":
@@ -235,6 +237,38 @@ class _Linearised:
         diff_step, x, c, _ = self._split_step(self.consts, leaves)
         _, vjp_fn, (_, _, index, pred) = jax.vjp(diff_step, x, c, has_aux=True)
         return vjp_fn, (index, pred)
+
+
+class _Packing:
+    """The stored residuals of a step as one row per dtype: a step's VJP has hundreds of
+    residuals (the relay's, about 370), and a row each cost a dynamic update in every
+    forward iteration and a dynamic read in every backward one (4 600 of the 14 500 traced
+    operations of the relay's gradient). Packing and unpacking are exact."""
+
+    def __init__(self, avals):
+        self.sizes = {}  # dtype -> the row's length
+        self.layout = []  # per residual: (dtype, offset, size, shape)
+        for a in avals:
+            dtype = jnp.dtype(a.dtype)
+            offset = self.sizes.get(dtype, 0)
+            self.layout.append((dtype, offset, a.size, a.shape))
+            self.sizes[dtype] = offset + a.size
+
+    def empty(self, max_steps):
+        return [jnp.zeros((max_steps, n), dtype) for dtype, n in self.sizes.items()]
+
+    def pack(self, values):
+        parts = {dtype: [] for dtype in self.sizes}
+        for (dtype, *_), v in zip(self.layout, values):
+            parts[dtype].append(jnp.ravel(jnp.asarray(v, dtype)))
+        return [jnp.concatenate(p) for p in parts.values()]
+
+    def unpack(self, rows):
+        rows = dict(zip(self.sizes, rows))
+        return [
+            lax.slice_in_dim(rows[dtype], offset, offset + size).reshape(shape)
+            for dtype, offset, size, shape in self.layout
+        ]
 
 
 def _reverse(lin, count, stored, ct_state, ct_buffers):

@@ -88,12 +88,14 @@ def test_episode_return_is_minus_objective(env):
 
 def test_truncated_after_max_steps_actions():
     """`truncated` comes with the task's `max_steps`-th step (it came one step early: the
-    task's budget counted `reset`'s attempt). Absolute action 0 steps by h_min: never done."""
-    env = StepSizeGymEnv(action_mode="absolute", task="relay_sliding", t1=0.5, max_steps=12)
+    task's budget counted `reset`'s attempt). Absolute action 0 steps by h_min: never done.
+    The environment of `test_absolute_action_mode` (its compiled programs)."""
+    env = StepSizeGymEnv(action_mode="absolute", **KW)
     env.reset(seed=0)
-    flags = [env.step(np.zeros(1, np.float32))[2:4] for _ in range(12)]
+    n = KW["max_steps"]
+    flags = [env.step(np.zeros(1, np.float32))[2:4] for _ in range(n)]
     assert flags[-1] == (False, True) and not any(any(f) for f in flags[:-1])
-    assert int(env._state.steps) == 12 and int(env._state.loop.n_attempts) == 13
+    assert int(env._state.steps) == n and int(env._state.loop.n_attempts) == n + 1
 
 
 def test_float32_reset_is_quiet_and_failures_are_in_info():
