@@ -1765,6 +1765,67 @@ MUTANTS = [
             "tests/test_step_doubling.py::test_same_steps_as_the_reference",
         ),
     ),
+    Mutant(
+        "contact_normals_positions_reversed",
+        "contact",
+        "nivpjax/_scene/contact.py",
+        "basis = np.eye(self.n_states, dtype=x.dtype)[list(self.positions)]",
+        "basis = np.eye(self.n_states, dtype=x.dtype)[list(self.positions)[::-1]]",
+        "_Normals: forward mode along the positions' own unit vectors, in their order "
+        "(W^T = dg/dq)",
+        (
+            "tests/test_curved_contact.py::test_held_on_the_wall_with_its_reaction",
+            "tests/test_curved_contact.py::test_bowl_as_accurate_as_the_force_in_the_field",
+        ),
+    ),
+    Mutant(
+        "stored_residuals_overlap",
+        "gradients",
+        "nivpjax/_stored_loop.py",
+        "self.sizes[dtype] = offset + a.size",
+        "self.sizes[dtype] = offset + 0 * a.size",
+        "_Packing: each residual has its own slice of its dtype's row (packing is exact)",
+        (
+            "tests/test_stored_adjoint.py::test_same_gradient_as_equinox_checkpointed_loop",
+            "tests/test_stored_adjoint.py::test_matches_finite_differences",
+        ),
+    ),
+    Mutant(
+        "nonlinear_final_test_without_roundoff_floor",
+        "nonlinear",
+        N + "base.py",
+        "converged = scaled_error(G_final, y_nd, rtol, atol, lax.stop_gradient(z)) <= 1",
+        "converged = scaled_error(G_final, y_nd, rtol, atol) <= 1",
+        "scaled_error: G's round-off is a few ulps of the projection's argument; a reaction "
+        "the state does not determine (a pushed cone at rtol 1e-8) failed at t0 without it",
+        (
+            TN + "test_undetermined_reaction_converges_at_round_off",
+            "tests/test_consistent_init.py::test_cone_in_slip_starts_at_tight_tolerance",
+        ),
+    ),
+    Mutant(
+        "newton_loop_without_roundoff_floor",
+        "nonlinear",
+        N + "semismooth_newton.py",
+        "& ((k == 0) | (scaled_error(g, y, rtol, atol, z) > 1))",
+        "& ((k == 0) | (scaled_error(g, y, rtol, atol) > 1))",
+        "SemismoothNewton stops at round-off too: without the floor it alternated between "
+        "4.5e-13 and 4e4 on the cone's undetermined reaction for all its iterations",
+        (
+            TN + "test_undetermined_reaction_converges_at_round_off",
+            "tests/test_consistent_init.py::test_cone_in_slip_starts_at_tight_tolerance",
+        ),
+    ),
+    Mutant(
+        "es_centre_not_evaluated",
+        "learning",
+        "nivpjax/learn/_estimators.py",
+        "([flat[None]] if centre else [])",
+        "([flat[None] + sigma * eps[:1]] if centre else [])",
+        "es_gradient(centre=True) appends L(theta) itself (the value a training step "
+        "descends from)",
+        ("tests/test_learn.py::test_es_gradient_quadratic",),
+    ),
 ]
 
 # Equivalent mutants, excluded from the list and the score (standard practice: a mutant no

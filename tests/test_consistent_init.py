@@ -147,3 +147,30 @@ def test_trapezoidal_cone_with_a_push_as_the_smooth_field():
     assert sol.result == nj.RESULTS.successful
     assert int(sol.n_accepted) <= 1.2 * int(ref.n_accepted)
     assert error <= 1.5 * error_f
+
+
+def test_cone_in_slip_starts_at_tight_tolerance():
+    # A pushed block in slip at t0, rtol 1e-8: the start's first stage (velocities held)
+    # leaves the reaction on a ray of solutions, its natural map at round-off (1e-12)
+    # above the stage's tolerance (1e-13): Newton alternated between 4.5e-13 and 4e4
+    # and the run failed at t0 with a nonlinear failure, for 4 of these 8 starts (every
+    # stepper; rtol 1e-7 passed). The stages now converge at round-off; the reaction is
+    # the physical one from the first step.
+    scene, _, _ = nj.scenes.block_on_plane(cone=True, push=(1.5, 2.0))
+
+    @jax.jit
+    def run(x0, args):
+        control = nj.PIDController(rtol=1e-8, atol=1e-10)
+        kw = dict(stepper=nj.Trapezoidal(), controller=control, max_steps=512, throw=False)
+        return scene.solve(0.0, 0.02, x0, args, **kw)
+
+    for mu in (1 / G, 0.05):
+        for v in ((0.5, 0.3), (0.3, 0.5), (1.0, 0.0), (0.2, -0.7)):
+            _, x0, args = nj.scenes.block_on_plane(mu=mu, velocity=v, cone=True, push=(1.5, 2.0))
+            sol = run(x0, args)
+            assert sol.result == nj.RESULTS.successful, (mu, v, sol.result)
+            k = int(sol.n_accepted)
+            _, m = scene.split(np.asarray(sol.ys[: k + 1]))
+            np.testing.assert_allclose(m["lam"][:, 0], G, rtol=1e-8)
+            friction = -mu * G * np.asarray(v) / np.linalg.norm(v)
+            np.testing.assert_allclose(m["lam"][0, 1:], friction, atol=1e-3)

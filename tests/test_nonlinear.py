@@ -166,6 +166,32 @@ def test_soc_step_sticking(name):
     np.testing.assert_allclose(sol.value, [0.0, 0.0, 0.0, 1.0, -0.2, -0.1], atol=1e-10)
 
 
+@pytest.mark.parametrize("name", SOLVERS)
+@pytest.mark.parametrize("v", [(0.5, 0.3), (0.3, 0.5), (0.2, -0.7)])
+@pytest.mark.parametrize("lam_n", [1e-3, 1.0])
+def test_undetermined_reaction_converges_at_round_off(name, v, lam_n):
+    # The cone's reaction on a block in slip with the velocity held (the start's first
+    # stage, theta = 0): lam = P_K(lam - rho R), R = (mu|v|, v) on the polar cone's
+    # boundary, solved by the whole ray lam_t = -mu lam_n v/|v|. The projection's
+    # argument is about 4e4 (rho 7e4), so G has a round-off of ~1e-12, which the
+    # tolerance 1e-13 + 1e-11 lam_n cannot see below: from a guess on the ray the VI
+    # method reported a failure at lam_n = 1e-3 (|G| = 9e-13), and in the scene
+    # (`test_consistent_init`) Newton alternated for all its iterations. Converged at
+    # round-off now (`scaled_error`'s floor), on the solution ray.
+    mu, rho = 1 / 9.81, 7.13e4
+    v = jnp.asarray(v)
+    R = jnp.concatenate([jnp.stack([mu * jnp.linalg.norm(v)]), v])
+    guess = jnp.concatenate([jnp.stack([lam_n]), -mu * lam_n * v / jnp.linalg.norm(v)])
+    project = _ctx_projector(nj.BlockProjector([([0, 1, 2], nj.SecondOrderCone(mu))]))
+    solver = eqx.tree_at(lambda s: (s.rtol, s.atol), SOLVERS[name], (1e-11, 1e-13))
+    sol = solver.solve(lambda lam: R + 0 * lam, project, rho, guess)
+    assert sol.result == nj.RESULTS.successful
+    assert int(sol.iterations) <= 3, int(sol.iterations)
+    lam = np.asarray(sol.value)
+    assert np.linalg.norm(lam[1:]) <= mu * lam[0] * (1 + 1e-12) + 1e-15  # in the cone
+    assert abs(float(jnp.dot(lam, R))) <= 1e-9 * (1 + np.linalg.norm(lam))  # on the ray
+
+
 _BOX_AND_ORTHANT = _ctx_projector(
     nj.BlockProjector([([1], nj.Box(-1.0, 1.0)), ([2], nj.NonNegative())])
 )

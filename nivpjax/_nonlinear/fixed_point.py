@@ -78,7 +78,8 @@ class FixedPointVI(AbstractNonlinearSolver):
             natural = step / jnp.minimum(1.0, alpha)
             finite = jnp.all(jnp.isfinite(y_bar)) & jnp.all(jnp.isfinite(R_bar))
             # Never stop at the initial guess (see SemismoothNewton): move at least once.
-            done = finite & (k > 0) & (scaled_error(natural, y, rtol, atol) <= 1)
+            argument = (y - alpha * rho * R) / jnp.minimum(1.0, alpha)  # natural's scale
+            done = finite & (k > 0) & (scaled_error(natural, y, rtol, atol, argument) <= 1)
             den = wnorm(step, 1 / rho)
             L = alpha * wnorm(R_bar - R, rho) / jnp.where(den > tiny, den, 1.0)
             L = jnp.where(den > tiny, L, 0.0)

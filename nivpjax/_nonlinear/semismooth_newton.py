@@ -6,7 +6,13 @@ from jax import lax
 
 from .._custom_types import plain_int
 from .._linear import AbstractLinearSolver, AutoLinear
-from .base import AbstractNonlinearSolver, init_history, natural_map, scaled_error
+from .base import (
+    AbstractNonlinearSolver,
+    init_history,
+    natural_map,
+    natural_map_and_argument,
+    scaled_error,
+)
 
 
 class SemismoothNewton(AbstractNonlinearSolver):
@@ -52,32 +58,33 @@ class SemismoothNewton(AbstractNonlinearSolver):
 
     def _iterate(self, residual, project, rho, y0, rtol, atol):
         G = natural_map(residual, project, rho)
-        G0 = G(y0)
+        Gz = natural_map_and_argument(residual, project, rho)
+        G0, z0 = Gz(y0)
         linear = self.linear_solver.resolve(y0.shape[0])
 
         def merit(g):
             return 0.5 * jnp.sum(g**2)
 
         def cond(carry):
-            y, g, k, history, _, _ = carry
+            (y, g, z), k, history, _, _ = carry
             return (
                 (k < self.max_steps)
                 # At least one iteration: with a tiny step the whole update of the stage can
                 # lie below the tolerance, and stopping at the initial guess would freeze
                 # the state (with a zero error estimate, so the controller cannot notice).
-                & ((k == 0) | (scaled_error(g, y, rtol, atol) > 1))
+                & ((k == 0) | (scaled_error(g, y, rtol, atol, z) > 1))
                 & jnp.all(jnp.isfinite(g))
             )
 
         def body(carry):
-            y, g, k, history, state, linear_its = carry
+            (y, g, _), k, history, state, linear_its = carry
             d, ok, its, state = linear.direction(G, y, g, atol + rtol * jnp.abs(y), state)
             d = jnp.where(ok, d, -g)
             m0 = merit(g)
             watchdog = k < self.full_steps
 
             def ls_cond(ls):
-                alpha, y_try, g_try, j = ls
+                alpha, y_try, (g_try, _), j = ls
                 m_try = merit(g_try)
                 finite = jnp.all(jnp.isfinite(g_try))
                 good = finite & (watchdog | (m_try <= (1 - 2 * self.sigma * alpha) * m0))
@@ -87,16 +94,16 @@ class SemismoothNewton(AbstractNonlinearSolver):
                 alpha, _, _, j = ls
                 alpha = self.beta * alpha
                 y_try = y + alpha * d
-                return alpha, y_try, G(y_try), j + 1
+                return alpha, y_try, Gz(y_try), j + 1
 
             one = jnp.ones((), y.dtype)
             y1 = y + d
-            _, y_new, g_new, _ = lax.while_loop(ls_cond, ls_body, (one, y1, G(y1), 0))
+            _, y_new, (g_new, z_new), _ = lax.while_loop(ls_cond, ls_body, (one, y1, Gz(y1), 0))
             k = k + 1
             history = history.at[k].set(jnp.max(jnp.abs(g_new), initial=0.0))
-            return y_new, g_new, k, history, state, linear_its + its
+            return (y_new, g_new, z_new), k, history, state, linear_its + its
 
         history = init_history(self.max_steps, y0.dtype, jnp.max(jnp.abs(G0), initial=0.0))
-        carry = (y0, G0, jnp.array(0), history, linear.init(y0), jnp.zeros((), jnp.int32))
-        y, _, k, history, _, linear_its = lax.while_loop(cond, body, carry)
+        init = ((y0, G0, z0), jnp.array(0), history, linear.init(y0), jnp.zeros((), jnp.int32))
+        (y, _, _), k, history, _, linear_its = lax.while_loop(cond, body, init)
         return y, (k.astype(y.dtype), history, linear_its.astype(y.dtype))
