@@ -35,3 +35,9 @@ with warnings.catch_warnings():
         line_search_failure = (
             "The Armijo line search of semismooth Newton found no step that decreases the merit."
         )
+        nonfinite_y0 = (
+            "`y0` contains NaN or inf (a traced `y0`, checked inside the compiled program)."
+        )
+        empty_span = (
+            "`t1` must be greater than `t0` (traced times, checked inside the compiled program)."
+        )

@@ -21,9 +21,9 @@ from ._solution import Solution
 from ._stepper import AbstractStepper
 
 
-# Whether a solve traced under a transformation checks its traced inputs in the program
-# (`equinox.error_if`, a host callback). `solve_batched` checks its concrete inputs itself and
-# turns this off: the callbacks do not run under a multi-device sharding.
+# Whether a solve traced under a transformation checks its traced inputs in the program (a
+# finite `y0`, `t1 > t0`: failure codes in `Solution.result`, raised by `throw`).
+# `solve_batched` checks its concrete inputs itself and turns this off.
 _IN_GRAPH_CHECKS: contextvars.ContextVar[bool] = contextvars.ContextVar(
     "nivpjax_in_graph_checks", default=True
 )
@@ -125,7 +125,10 @@ def solve(
 
     **Returns:** a [`nivpjax.Solution`][].
 
-    **Raises:** `ValueError`/`TypeError` for bad input, before any work.
+    **Raises:** `ValueError`/`TypeError` for bad input, before any work. Inputs traced by
+    an outer transformation (`y0`, `t0`, `t1` under `jit`) are checked inside the program
+    instead: a non-finite `y0` or `t1 <= t0` ends the run at once with
+    `RESULTS.nonfinite_y0` or `RESULTS.empty_span` (raised with `throw=True`).
     """
     y0 = v.check_y0(y0)
     n = y0.shape[0]
@@ -212,9 +215,6 @@ def _solve_impl(
     check_inside,
 ):
     meter = progress_callback(t0, t1) if progress else None
-    if check_inside:  # concrete inputs were checked before the call
-        y0 = eqx.error_if(y0, ~jnp.all(jnp.isfinite(y0)), "`y0` contains NaN or inf.")
-        y0 = eqx.error_if(y0, ~(t1 > t0), "`t1` must be greater than `t0`.")
     sol = run(
         model,
         stepper,
@@ -243,12 +243,25 @@ def _solve_impl(
             (t_eval, y_eval, multipliers_eval),
             is_leaf=lambda x: x is None,
         )
+    if check_inside:  # concrete inputs were checked before the call
+        sol = _checked_inputs(sol, y0, t0, t1)
     if throw_inside:
         sol = _error_if_failed(sol)
     return sol
 
 
 _solve_jit = CachedJit(_solve_impl)
+
+
+def _checked_inputs(sol: Solution, y0, t0, t1) -> Solution:
+    # Traced inputs are checked in the program as failure codes, not as host callbacks
+    # (`equinox.error_if`): JAX's persistent cache does not store a program that holds a
+    # callback, so every jitted solve recompiled in every process, `throw=False` or not.
+    # The run itself goes ahead (with `t1 <= t0` the loop does not start; a NaN `y0`
+    # fails in its first steps); its outputs are meaningless, as the result says.
+    result = RESULTS.where(jnp.all(jnp.isfinite(y0)), sol.result, RESULTS.nonfinite_y0)
+    result = RESULTS.where(t1 > t0, result, RESULTS.empty_span)
+    return eqx.tree_at(lambda s: s.result, sol, result)
 
 
 def _error_if_failed(sol: Solution) -> Solution:

@@ -18,7 +18,9 @@ def _share_compiled_programs():
     # test (or the other xdist worker) has already compiled: closures rebuilt per test give
     # the same XLA program, which JAX's in-memory caches, keyed by function identity, miss.
     # JAX's persistent cache is keyed by the program itself: the workers share one on disk
-    # (and later runs on this machine reuse it). A cache the user set is left alone.
+    # (and later runs on this machine reuse it). It never stores a program with a host
+    # callback: a test's own jit around a solve with throw=True (the default) compiles in
+    # every run. A cache the user set is left alone.
     if os.environ.get("JAX_COMPILATION_CACHE_DIR"):
         return
     try:

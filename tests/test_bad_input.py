@@ -1089,6 +1089,25 @@ def test_jit_throw_raises_runtime_errors():
         fixed_step_final_state(jnp.asarray(Y0), -1.0)
 
 
+@eqx.filter_jit
+def _fixed_step_quiet(y0, t1):
+    return nj.solve(decay, 0.0, t1, y0, throw=False, **FIXED)
+
+
+def test_traced_bad_inputs_are_failure_codes():
+    # With throw=False the in-program checks of traced inputs are result codes (no host
+    # callback: JAX's persistent cache stores the program, see test_cache), and the run
+    # stops at once; a good run is unaffected.
+    good = _fixed_step_quiet(jnp.asarray(Y0), jnp.asarray(0.2))
+    assert good.result == nj.RESULTS.successful
+    bad_y0 = _fixed_step_quiet(jnp.array([1.0, NAN]), jnp.asarray(0.2))
+    assert bad_y0.result == nj.RESULTS.nonfinite_y0
+    for t1 in (0.0, -1.0):
+        sol = _fixed_step_quiet(jnp.asarray(Y0), jnp.asarray(t1))
+        assert sol.result == nj.RESULTS.empty_span
+        assert int(sol.n_accepted) == 0
+
+
 def test_plain_jax_jit_throw_raises():
     # Under plain `jax.jit` the equinox error surfaces as whatever JAX makes of a failed
     # callback (JaxRuntimeError on the first call, ValueError from the C++ fast path later),

@@ -344,3 +344,19 @@ def test_clear_caches_frees_the_compiled_programs():
         again = _solve(decay(1.0), max_steps=96)
     assert n["traces"] == 1
     np.testing.assert_array_equal(again.y_final, sol.y_final)
+
+
+def test_jitted_solve_without_throw_holds_no_host_callback():
+    # JAX's persistent cache never stores a program with a host callback. A solve traced
+    # in the user's jit checked its inputs through equinox.error_if (a callback) whatever
+    # `throw` said, so no jitted solve was ever stored; with throw=False it holds none now
+    # (throw=True raises through one, by design).
+    decay = lambda t, y, a: -y  # noqa: E731
+    y0 = jnp.ones(2)
+
+    def text(throw):
+        fn = jax.jit(lambda y: nj.solve(decay, 0.0, 1.0, y, throw=throw).y_final)
+        return fn.lower(y0).as_text()
+
+    assert "callback" not in text(False)
+    assert "callback" in text(True)
