@@ -184,14 +184,15 @@ SPIRAL = Family(
 # --- Stick-slip with slip weakening (mu_s > mu_k), driven. ---------------------------
 
 
-def _slider_make(p):
+def _spring_slider(p, **kw):
+    # The driven spring-slider with the grid point's friction law and drive.
     return nj.scenes.spring_slider(
-        mu_static=p["mu_s"],
-        mu_kinetic=p["mu_k"],
-        slip_scale=p["Dc"],
-        drive_velocity=p["V"],
-        velocity=0.0,
+        mu_static=p["mu_s"], mu_kinetic=p["mu_k"], slip_scale=p["Dc"], drive_velocity=p["V"], **kw
     )
+
+
+def _slider_make(p):
+    return _spring_slider(p, velocity=0.0)
 
 
 def _slider_error(p, ts, xs):
@@ -352,15 +353,7 @@ PUSHED_CONE = Family(
 
 
 def _slip_make(p):
-    return nj.scenes.spring_slider(
-        damping=p["c"],
-        mu_static=p["mu_s"],
-        mu_kinetic=p["mu_k"],
-        slip_scale=p["Dc"],
-        drive_velocity=p["V"],
-        velocity=p["v0"],
-        position=p["s0"],
-    )
+    return _spring_slider(p, damping=p["c"], velocity=p["v0"], position=p["s0"])
 
 
 def _slip_error(p, ts, xs):
