@@ -384,8 +384,8 @@ MUTANTS = [
         "ssn_stops_at_initial_guess",
         "nonlinear",
         N + "semismooth_newton.py",
-        "& ((k == 0) | (scaled_error(g, y, rtol, atol) > 1))",
-        "& (scaled_error(g, y, rtol, atol) > 1)",
+        "& ((k == 0) | (scaled_error(g, y, rtol, atol, z) > 1))",
+        "& (scaled_error(g, y, rtol, atol, z) > 1)",
         "the comment: stopping at the initial guess freezes the state on tiny steps "
         "(issue 29's survivor)",
         (TN + "test_tiny_steps_do_not_freeze_the_state",),
@@ -403,8 +403,8 @@ MUTANTS = [
         "vi_stops_at_initial_guess",
         "nonlinear",
         N + "fixed_point.py",
-        "done = finite & (k > 0) & (scaled_error(natural, y, rtol, atol) <= 1)",
-        "done = finite & (scaled_error(natural, y, rtol, atol) <= 1)",
+        "done = finite & (k > 0) & (scaled_error(natural, y, rtol, atol, argument) <= 1)",
+        "done = finite & (scaled_error(natural, y, rtol, atol, argument) <= 1)",
         "the comment: never stop at the initial guess (see SemismoothNewton): move at least once "
         "(with alpha0 < 1 a done first iterate returned the start of a tiny step)",
         (

@@ -27,8 +27,8 @@ def es_gradient(
 
     **Arguments:** `loss` (`params -> scalar`, vmappable), `params` (a pytree of float
     arrays), `key`, `pairs` $P$, `sigma` $\sigma$, `centre`: also evaluate $L(\theta)$,
-    in the same `vmap` (one program holds one copy of `loss`, not two; a training step
-    wants the value it descends from).
+    batched with the perturbations (one program holds one copy of `loss`, not two; a
+    training step wants the value it descends from).
 
     **Returns:** `(g, losses)`: the estimate (shaped like `params`) and the $2P$ losses,
     with $L(\theta)$ appended as a last, $(2P + 1)$-th, where `centre`.
