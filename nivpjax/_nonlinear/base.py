@@ -51,15 +51,6 @@ class NonlinearSolution(eqx.Module):
     linear_iterations: Int[Array, ""] = eqx.field(default_factory=lambda: jnp.zeros((), jnp.int32))
 
 
-def natural_map(residual: Residual, project: Project, rho) -> Callable[[Array], Array]:
-    """$G(y) = y - P(y - \\rho R(y); y, \\rho)$: zero exactly at solutions of the stage's VI."""
-
-    def G(y):
-        return y - project(y - rho * residual(y), y, rho)
-
-    return G
-
-
 def natural_map_and_argument(residual: Residual, project: Project, rho):
     """`y -> (G(y), z)`: the natural map and the projection's argument $z = y - \\rho R(y)$,
     whose size sets the round-off of $G$ (`scaled_error`'s `z`)."""
@@ -69,6 +60,12 @@ def natural_map_and_argument(residual: Residual, project: Project, rho):
         return y - project(z, y, rho), z
 
     return G
+
+
+def natural_map(residual: Residual, project: Project, rho) -> Callable[[Array], Array]:
+    """$G(y) = y - P(y - \\rho R(y); y, \\rho)$: zero exactly at solutions of the stage's VI."""
+    G = natural_map_and_argument(residual, project, rho)
+    return lambda y: G(y)[0]
 
 
 # The round-off of G = y - P(z) on a component where the projection cancels a large
