@@ -27,7 +27,7 @@ import nivpjax as nj  # noqa: E402
 
 from . import reliability as campaign  # noqa: E402
 from .families import FAMILIES  # noqa: E402
-from .sliding_order import _slider_field  # noqa: E402
+from .sliding_order import _slider_field, solve_either  # noqa: E402
 
 
 OUT = Path(__file__).resolve().parent / "results" / "slider_slip_smooth.md"
@@ -43,9 +43,7 @@ def _runs(scene, cls):
                 max_steps=campaign.MAX_STEPS,
                 throw=False,
             )
-            if smooth:
-                return nj.solve(_slider_field, 0.0, FAMILY.t1, x0, args, **kw)
-            return scene.solve(0.0, FAMILY.t1, x0, args, **kw)
+            return solve_either(scene, _slider_field, smooth, FAMILY.t1, x0, args, **kw)
 
         return jax.jit(run)
 

@@ -120,13 +120,17 @@ def _error(name, sol):
     return float(np.max(np.abs(xs[:, :n] - exact(name, ts)))), k
 
 
-def _solve(name, stepper, smooth, t1, **kw):
-    # The problem through its effect (its scene) or with the law in f (`smooth`).
-    (scene, x0, args), field, _ = PROBLEMS[name]
-    kw["stepper"] = STEPPERS[stepper]()
+def solve_either(scene, field, smooth, t1, x0, args, **kw):
+    """From 0 to `t1` through the effect (`scene`) or with the law in f (`field`, where
+    `smooth`)."""
     if smooth:
         return nj.solve(field, 0.0, t1, x0, args, **kw)
     return scene.solve(0.0, t1, x0, args, **kw)
+
+
+def _solve(name, stepper, smooth, t1, **kw):
+    (scene, x0, args), field, _ = PROBLEMS[name]
+    return solve_either(scene, field, smooth, t1, x0, args, stepper=STEPPERS[stepper](), **kw)
 
 
 def adaptive(name, stepper, smooth):
