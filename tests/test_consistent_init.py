@@ -109,18 +109,9 @@ def test_trapezoidal_cone_with_a_push_as_the_smooth_field():
     # Issue 32's disk law as cone friction (mu g = 1, a rotating push, |v| >= 0.48): with
     # consistent multipliers the trapezoidal rule takes the steps of the same law written
     # into f (before: 10 935 steps against 433 at rtol 1e-5), at the same error.
-    mu = 1.0 / G
-
-    def dynamics(t, x, a, m):
-        lam, push = m["lam"], 1.5 * jnp.stack([jnp.cos(2 * t), jnp.sin(2 * t)])
-        return jnp.concatenate([x[3:], jnp.stack([lam[1] + push[0], lam[2] + push[1], lam[0] - G])])
-
-    def modified_velocity(t, x, lam, a):
-        vt = x[3:5]
-        return -jnp.concatenate([jnp.stack([x[5] + mu * jnp.sqrt(jnp.sum(vt**2))]), vt])
-
-    cone = nj.SetValued("lam", nj.SecondOrderCone(lambda t, y, a: mu), modified_velocity, n=3)
-    scene = nj.Scene(dynamics, 6, (cone,))
+    scene, x0, args = nj.scenes.block_on_plane(
+        mu=1.0 / G, gravity=G, velocity=(0.5, 0.3), cone=True, push=(1.5, 2.0)
+    )
 
     def smooth(t, v, args):
         return 1.5 * jnp.stack([jnp.cos(2 * t), jnp.sin(2 * t)]) - v / jnp.linalg.norm(v)
@@ -128,8 +119,7 @@ def test_trapezoidal_cone_with_a_push_as_the_smooth_field():
     t_eval = jnp.linspace(0.0, 4.0, 41)
     control = nj.PIDController(rtol=1e-5, atol=1e-7)
     kw = dict(stepper=nj.Trapezoidal(), controller=control, t_eval=t_eval)
-    x0 = jnp.asarray([0.0, 0.0, 0.0, 0.5, 0.3, 0.0])
-    sol = scene.solve(0.0, 4.0, x0, None, **kw)
+    sol = scene.solve(0.0, 4.0, x0, args, **kw)
     ref = nj.solve(smooth, 0.0, 4.0, jnp.asarray([0.5, 0.3]), **kw)
     fine = solve_ivp(
         lambda t, v: np.asarray(smooth(t, v, None)),
