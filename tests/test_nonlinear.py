@@ -369,8 +369,11 @@ def test_float32_relay():
 
 def test_float32_tolerances_are_clamped_to_its_resolution():
     # y + sin(y) / 2 = c componentwise: float32 evaluates G to a few 1e-8 relative, above the
-    # default rtol 1e-8 / atol 1e-10 (clamped to 8 eps); without the clamp no iterate meets
-    # the test. Both solvers converge to the float64 solution.
+    # default rtol 1e-8 / atol 1e-10 (clamped to 8 eps). Before the round-off floor of
+    # `scaled_error` (16 eps |z|) no iterate met the unclamped test; the floor covers it
+    # now (here z = y), so this test no longer fails without the clamp (the mutant
+    # `float32_tolerances_unclamped` survives; the clamp still spares the VI method a few
+    # iterations below float32's resolution). Both solvers converge to the float64 solution.
     c = jnp.linspace(1.0, 3.0, 8)
     exact = NEWTON.solve(lambda y: y + 0.5 * jnp.sin(y) - c, lambda z, y, rho: z, 1.0, c).value
     for solver in (nj.SemismoothNewton(), nj.FixedPointVI()):
