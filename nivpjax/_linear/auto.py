@@ -39,8 +39,8 @@ class AutoLinear(AbstractLinearSolver):
     def init(self, y):
         return self.resolve(y.shape[0]).init(y)
 
-    def direction(self, G, y, g, scale, state):
-        return self.resolve(y.shape[0]).direction(G, y, g, scale, state)
+    def direction(self, G, y, g, scale, state, linearize=None):
+        return self.resolve(y.shape[0]).direction(G, y, g, scale, state, linearize)
 
     def tangent_solve(self, g, b):
         return self.resolve(b.shape[0]).tangent_solve(g, b)

@@ -28,13 +28,21 @@ class AbstractLinearSolver(eqx.Module):
 
     @abc.abstractmethod
     def direction(
-        self, G: Map, y: Float[Array, " n"], g: Float[Array, " n"], scale, state
+        self,
+        G: Map,
+        y: Float[Array, " n"],
+        g: Float[Array, " n"],
+        scale,
+        state,
+        linearize: Callable[[], Map] | None = None,
     ) -> tuple[Float[Array, " n"], Bool[Array, ""], Int[Array, ""], Any]:
         r"""`(d, ok, linear_iterations, state)`: the Newton direction $d$ with
         $G'(y)\,d \approx -g$ ($g = G(y)$), whether it is usable (finite; for an inexact
         solve, not necessarily to its tolerance: the nonlinear test decides), the Krylov
         iterations it took (0 for direct solves), and the next state. `scale`: the
-        per-component tolerance $\text{atol} + \text{rtol}|y|$ of the nonlinear test."""
+        per-component tolerance $\text{atol} + \text{rtol}|y|$ of the nonlinear test.
+        `linearize`: where given, returns $v \mapsto G'(y)\,v$ more cheaply than
+        `jax.linearize(G, y)` (semismooth Newton knows the projection's argument at $y$)."""
 
     @abc.abstractmethod
     def tangent_solve(self, g: Map, b: Float[Array, " n"]) -> Float[Array, " n"]:

@@ -19,7 +19,7 @@ class DenseLU(AbstractLinearSolver):
     def init(self, y):
         return None
 
-    def direction(self, G, y, g, scale, state):
+    def direction(self, G, y, g, scale, state, linearize=None):
         J = jax.jacfwd(G)(y)
         d, ok = _linalg.solve(J, -g)
         return d, ok, jnp.zeros((), jnp.int32), state

@@ -9,6 +9,7 @@ from .._linear import AbstractLinearSolver, AutoLinear
 from .base import (
     AbstractNonlinearSolver,
     init_history,
+    linearised_natural_map,
     natural_map,
     natural_map_and_argument,
     scaled_error,
@@ -77,8 +78,10 @@ class SemismoothNewton(AbstractNonlinearSolver):
             )
 
         def body(carry):
-            (y, g, _), k, history, state, linear_its = carry
-            d, ok, its, state = linear.direction(G, y, g, atol + rtol * jnp.abs(y), state)
+            (y, g, z), k, history, state, linear_its = carry
+            linearize = lambda: linearised_natural_map(residual, project, rho, y, z)
+            scale = atol + rtol * jnp.abs(y)
+            d, ok, its, state = linear.direction(G, y, g, scale, state, linearize)
             d = jnp.where(ok, d, -g)
             m0 = merit(g)
             watchdog = k < self.full_steps
