@@ -9,7 +9,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._elastic import dense_root, spectral_apply, spectral_apply_np, spectral_symbol
+from ._elastic import dense_eig, dense_root, spectral_apply, spectral_apply_np, spectral_symbol
 from ._projector import SecondOrderCone
 from ._scene import Contact, Diode, Friction, Relay, Saturation, Scene, SetValued
 
@@ -509,17 +509,22 @@ def fault(
 
     else:
         K = np.asarray(kernel, dtype=float)
-        dense_root(K)  # symmetric positive definite, checked before any work
+        lam, Q = dense_eig(K)  # symmetric positive definite, checked before any work
 
         def solve_K(b):
-            return np.linalg.solve(K, b)
+            return Q @ ((Q.T @ b) / lam)
 
     scale = np.mean(solve_K(sigma)) / np.mean(sigma) if normalise else 1.0
     u_c = -solve_K((mu_res + delta_mu) * sigma) / scale
     if spectral:
         kernel_args = {"symbol": _f(scale * symbol)}
     else:
-        kernel_args = {"K": _f(scale * K), "R": _f(dense_root(scale * K))}
+        if not scale > 0:
+            raise ValueError(
+                "`kernel`: the normalisation mean(K^-1 sigma) / mean(sigma) must be positive, "
+                f"got {scale:.3g}; pass normalise=False or a kernel of the study's sign."
+            )
+        kernel_args = {"K": _f(scale * K), "R": _f(dense_root(K, (scale * lam, Q)))}
 
     def apply(a, w, root):
         if spectral:

@@ -187,6 +187,10 @@ def test_spectral_kernel_against_dense_sums():
     k0 = 2 * np.pi / max(LX, LZ)
     K = periodic_dense(NX, NZ, LX, LZ, NU, k0)
     sigma = np.asarray(args["sigma"])
+    # The same kernel passed as a dense matrix (its set-up by one `eigh`).
+    _, x0_dense, args_dense = scenes.fault(
+        K, NX, NZ, length=3.0, depth=2.0, sigma=np.linspace(1, 2, NX * NZ)
+    )
     # The study's normalisation mean(K^-1 sigma) = mean(sigma), in dense algebra.
     K *= np.mean(np.linalg.solve(K, sigma)) / np.mean(sigma)
     lam, Q = np.linalg.eigh(K)
@@ -199,6 +203,9 @@ def test_spectral_kernel_against_dense_sums():
     # Initial state: u = (1 + 1e-5) u_c, u_c = -K^-1 mu(0) sigma.
     u_c = -np.linalg.solve(K, 0.6 * sigma)
     assert np.allclose(x0[NX * NZ : 2 * NX * NZ], (1 + 1e-5) * u_c, rtol=1e-12, atol=0)
+    np.testing.assert_allclose(args_dense["K"], K, rtol=0, atol=1e-12 * np.abs(K).max())
+    np.testing.assert_allclose(args_dense["R"], R, rtol=0, atol=1e-12 * np.abs(R).max())
+    np.testing.assert_allclose(x0_dense, x0, rtol=1e-11, atol=0)
 
 
 def test_spectral_kernel_is_half_wavenumber_on_a_mode():
