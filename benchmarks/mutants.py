@@ -544,12 +544,64 @@ MUTANTS = [
         ("tests/test_linear_large.py::test_forcing_terms_tighten_into_superlinear_convergence",),
     ),
     Mutant(
+        "gmres_tests_after_the_cycle",
+        "nonlinear",
+        "nivpjax/_linear/gmres.py",
+        "return (j < restart) & (jnp.abs(g[j]) > tol)",
+        "return j < restart",
+        "gmres's docstring: the cycle stops at the first product that meets its tolerance",
+        ("tests/test_gmres.py::test_stops_at_the_product_that_meets_the_tolerance",),
+    ),
+    Mutant(
+        "gmres_gram_schmidt_once",
+        "nonlinear",
+        "nivpjax/_linear/gmres.py",
+        "for _ in range(2):  # classical Gram-Schmidt, twice",
+        "for _ in range(1):  # classical Gram-Schmidt, twice",
+        "gmres's docstring: Gram-Schmidt twice is as accurate as modified Gram-Schmidt",
+        (
+            "tests/test_gmres.py::"
+            "test_gram_schmidt_twice_keeps_the_residual_true_when_the_basis_is_ill_conditioned",
+        ),
+    ),
+    Mutant(
+        "gmres_givens_sign",
+        "nonlinear",
+        "nivpjax/_linear/gmres.py",
+        "g = g.at[j + 1].set(-s_j * g[j]).at[j].set(c_j * g[j])",
+        "g = g.at[j + 1].set(s_j * g[j]).at[j].set(c_j * g[j])",
+        "the Givens rotation applied to the right-hand side",
+        ("tests/test_gmres.py::test_true_residual_meets_the_tolerance",),
+    ),
+    Mutant(
+        "gmres_restart_from_the_old_residual",
+        "nonlinear",
+        "nivpjax/_linear/gmres.py",
+        "r = lax.cond(again, lambda: b - matvec(x), lambda: r)",
+        "r = lax.cond(again, lambda: b, lambda: r)",
+        "gmres's docstring: a restart recomputes the true residual",
+        ("tests/test_gmres.py::test_restarts_recompute_the_residual_and_count_it",),
+    ),
+    Mutant(
+        "linearised_natural_map_without_state_dependence",
+        "nonlinear",
+        N + "base.py",
+        "return lambda v: v - dP(v - rho * dR(v), v)",
+        "return lambda v: v - dP(v - rho * dR(v), 0 * v)",
+        "linearised_natural_map's docstring: the same map as jax.linearize of G, the "
+        "projection's dependence on the state included",
+        (
+            "tests/test_linear_large.py::"
+            "test_linearised_natural_map_from_the_known_argument_is_the_jvp",
+        ),
+    ),
+    Mutant(
         "krylov_cauchy_test_kept",
         "nonlinear",
         "nivpjax/_linear/krylov.py",
         "c = 1.0 / jnp.sqrt(jnp.finfo(b.dtype).eps)",
         "c = 1.0",
-        "Krylov._solve's comment: lineax's test on the last update costs GMRES a whole cycle",
+        "Krylov._solve's comment: lineax's test on the last update costs an extra iteration",
         ("tests/test_linear_large.py::test_an_exact_preconditioner_solves_in_one_krylov_cycle",),
     ),
     Mutant(

@@ -39,11 +39,17 @@ def _project(projector, y_prev, h):
 
 
 def chain_stage(solver, p, friction=True):
-    r"""One backward Euler stage of a driven spring-block chain (positions u, velocities
-    v) with slip-weakening Coulomb friction $c(u) = p_3 (0.5 + 0.1 e^{-|u|/0.05})$ on
-    every velocity (or, `friction=False`, a box $|v_i| \le 0.3$, or nothing when
-    `friction=None`). `p = (coupling, drive, step, friction scale)`; the initial state
-    is fixed and uneven, so some blocks stick and some slip."""
+    residual, project, h, y_prev = chain_parts(p, friction)
+    return solver.solve(residual, project, h, y_prev)
+
+
+def chain_parts(p, friction=True):
+    r"""`(residual, project, rho, y_prev)` of one backward Euler stage of a driven
+    spring-block chain (positions u, velocities v) with slip-weakening Coulomb friction
+    $c(u) = p_3 (0.5 + 0.1 e^{-|u|/0.05})$ on every velocity (or, `friction=False`, a
+    box $|v_i| \le 0.3$, or nothing when `friction=None`).
+    `p = (coupling, drive, step, friction scale)`; the initial state is fixed and
+    uneven, so some blocks stick and some slip."""
     kc, drive, h, scale = p[0], p[1], p[2], p[3]
     i = jnp.arange(N, dtype=p.dtype)
     u0 = 0.3 * jnp.sin(1.7 * i)
@@ -64,7 +70,7 @@ def chain_stage(solver, p, friction=True):
         projector = nj.BlockProjector([(velocities, nj.CoulombFriction(bound))])
     else:
         projector = nj.BlockProjector([(velocities, nj.Box(-0.3 * scale, 0.3 * scale))])
-    return solver.solve(residual, _project(projector, y_prev, h), h, y_prev)
+    return residual, _project(projector, y_prev, h), h, y_prev
 
 
 P0 = jnp.array([4.0, 0.2, 0.3, 2.0])
@@ -302,3 +308,26 @@ def test_gradient_through_a_whole_solve_matches_dense():
     assert np.all(np.isfinite(g_dense)) and np.all(g_dense != 0)
     np.testing.assert_allclose(v_krylov, v_dense, rtol=1e-9)
     np.testing.assert_allclose(g_krylov, g_dense, rtol=1e-6)
+
+
+def test_linearised_natural_map_from_the_known_argument_is_the_jvp():
+    # Semismooth Newton's Krylov operator: R and P linearised apart at the known
+    # z = y - rho R(y) must equal the JVP of the natural map G, including the bound's
+    # dependence on the state (the slip-weakening friction reads u through the context).
+    from nivpjax._nonlinear.base import linearised_natural_map, natural_map
+
+    residual, project, rho, y_prev = chain_parts(P0)
+    rng = np.random.default_rng(4)
+    y = y_prev + 0.05 * jnp.asarray(rng.standard_normal(2 * N))
+    z = y - rho * residual(y)
+    lin = linearised_natural_map(residual, project, rho, y, z)
+    G = natural_map(residual, project, rho)
+    for _ in range(3):
+        v = jnp.asarray(rng.standard_normal(2 * N))
+        expected = jax.jvp(G, (y,), (v,))[1]
+        np.testing.assert_allclose(lin(v), expected, rtol=0, atol=1e-12)
+    # The bound's state dependence matters here: without the y-part of P's derivative
+    # the products differ.
+    _, dP = jax.linearize(lambda z_, y_: project(z_, y_, rho), z, y)
+    v = jnp.asarray(rng.standard_normal(2 * N))
+    assert float(jnp.max(jnp.abs(dP(v, v) - dP(v, jnp.zeros_like(v))))) > 1e-3
