@@ -628,6 +628,13 @@ def _fmt(x, spec=".3g"):
     return "–" if x is None else format(x, spec)
 
 
+def _compile(row):
+    # A run of minutes varies by more than its compile time: the difference is then noise.
+    if row["compile_s"] < 1.0:
+        return f"< 1 (first call {row['compile_s'] + row['run_s']:.3g} s)"
+    return _fmt(row["compile_s"], ".1f")
+
+
 def _row_or_note(row):
     if row is None:
         return "not run"
@@ -727,7 +734,7 @@ def markdown(r):
             out.append(f"{head} {_row_or_note(x)} | | | | | | | | |")
             continue
         out.append(
-            f"{head} {_fmt(x['run_s'])} | {_fmt(x['cpu_s'])} | {_fmt(x['compile_s'], '.1f')} | "
+            f"{head} {_fmt(x['run_s'])} | {_fmt(x['cpu_s'])} | {_compile(x)} | "
             f"{_fmt(x.get('setup_s'), '.1f')} | {x['accepted']}/{x['rejected']} | "
             f"{x['newton']} | {_fmt(x['mean_slip'], '.6g')} | "
             f"{_fmt(x['maxrss_MB'], '.0f')} |"
