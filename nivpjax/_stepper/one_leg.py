@@ -187,6 +187,12 @@ class _AbstractTheta(AbstractStepper):
         reaction = model.reaction(multipliers)
         e = theta_error(model, self.theta, t0, h, y0, y1, f0, f1, reaction, args)
         e = model.to_state(e)
+        if self.theta < 1.0 and model.has_arrests:
+            # Rows that came to rest inside the step (friction sticking): the defect above
+            # measures the jump of their effective rate f + r, not an error of their
+            # value, which is exact if the slip had ended (as in Bathe's estimate).
+            arrested, stop_error = model.arrest_error(t1, h, y0, y1, f0, f1, args)
+            e = jnp.where(arrested, stop_error, e)
         if self.theta < 1.0:
             left = departure_error(model, t0, h, y0, y1, f0, f1, args)
             e = jnp.where(jnp.abs(left) > jnp.abs(e), left, e)
