@@ -544,6 +544,15 @@ MUTANTS = [
         ("tests/test_linear_large.py::test_forcing_terms_tighten_into_superlinear_convergence",),
     ),
     Mutant(
+        "theta_arrest_estimate_dropped",
+        "steppers",
+        S + "one_leg.py",
+        "if self.theta < 1.0 and model.has_arrests:",
+        "if False and model.has_arrests:",
+        "the theta family's comment: an arrested row's value is exact if the slip had ended",
+        (TE + "test_estimate_of_a_block_coming_to_rest_inside_the_step",),
+    ),
+    Mutant(
         "gmres_tests_after_the_cycle",
         "nonlinear",
         "nivpjax/_linear/gmres.py",
@@ -874,7 +883,7 @@ MUTANTS = [
         "Bathe's docstring: on a row that came to rest inside the step the estimate is the "
         "projector's (the jump of its rate is no error of its value: the fault's steps "
         "collapsed at every arrest)",
-        (TE + "test_bathe_estimate_of_a_block_coming_to_rest_inside_the_step",),
+        (TE + "test_estimate_of_a_block_coming_to_rest_inside_the_step",),
     ),
     Mutant(
         "bathe_split_on_f_alone",
@@ -884,7 +893,7 @@ MUTANTS = [
         "f0, f_mid, f1 = (jnp.where(model.weighed, b, b) for a, b in zip(F, f))",
         "_split_error's comment: on f alone a row held throughout is charged the change of "
         "its load",
-        (TE + "test_bathe_estimate_of_a_block_coming_to_rest_inside_the_step",),
+        (TE + "test_estimate_of_a_block_coming_to_rest_inside_the_step",),
     ),
     Mutant(
         "friction_arrest_early_uncharged",
