@@ -23,12 +23,13 @@ class _ForcingState(eqx.Module):
 
 
 class Krylov(AbstractLinearSolver):
-    r"""Matrix-free Newton directions: `jax.linearize` of the natural map at the iterate
-    gives $v \mapsto G'(y)\,v$ (one product costs about one residual evaluation; the
-    linearisation fixes the branch of every kink, so the operator is exactly linear, with
-    the projectors' selected elements), and a Krylov method solves $G'(y)\,d = -G(y)$ to
-    the relative accuracy $\eta_k$. Nothing of size $n^2$ is formed: the cost of an
-    iteration grows like the cost of the residual.
+    r"""Matrix-free Newton directions: the linearisation of the natural map at the iterate
+    gives $v \mapsto G'(y)\,v$ (`jax.linearize`, or semismooth Newton's from the
+    projection argument it already holds, which spares a residual; one product costs
+    about one residual evaluation; the linearisation fixes the branch of every kink, so
+    the operator is exactly linear, with the projectors' selected elements), and a Krylov
+    method solves $G'(y)\,d = -G(y)$ to the relative accuracy $\eta_k$. Nothing of size
+    $n^2$ is formed: the cost of an iteration grows like the cost of the residual.
 
     - GMRES (the default) is nivpjax's own restarted GMRES(m): its Givens recurrence
       gives the residual after every product, and it stops at the first product with
