@@ -69,7 +69,7 @@ def natural_map(residual: Residual, project: Project, rho) -> Callable[[Array], 
 
 
 def linearised_natural_map(residual: Residual, project: Project, rho, y, z):
-    """$v \mapsto G'(y)\,v$ at an iterate whose projection argument
+    r"""$v \mapsto G'(y)\,v$ at an iterate whose projection argument
     $z = y - \rho R(y)$ is already known: the same linear map as `jax.linearize` of
     [`natural_map`][] at $y$, $v - \partial_z P\,(v - \rho R'(y) v) - \partial_y P\,v$,
     without evaluating $R(y)$ again (its value is unused, so XLA drops it; on the fault's
