@@ -547,9 +547,11 @@ MUTANTS = [
         "theta_arrest_estimate_dropped",
         "steppers",
         S + "one_leg.py",
-        "if self.theta < 1.0 and model.has_arrests:",
-        "if False and model.has_arrests:",
-        "the theta family's comment: an arrested row's value is exact if the slip had ended",
+        "if self.theta < 1.0:",
+        "if self.theta < 0.5:",
+        "the theta family's estimate takes held_row_errors' arrest estimate (an arrested "
+        "row's value is exact if the slip had ended) for every theta < 1, the trapezoidal "
+        "rule included",
         (TE + "test_estimate_of_a_block_coming_to_rest_inside_the_step",),
     ),
     Mutant(
@@ -877,7 +879,7 @@ MUTANTS = [
     Mutant(
         "bathe_arrest_estimate_dropped",
         "steppers",
-        S + "bathe.py",
+        S + "departure.py",
         "e = jnp.where(arrested, stop_error, e)",
         "e = jnp.where(arrested, e, e)",
         "Bathe's docstring: on a row that came to rest inside the step the estimate is the "
@@ -1217,9 +1219,9 @@ MUTANTS = [
     Mutant(
         "theta_departure_uncharged",
         "steppers",
-        "nivpjax/_stepper/one_leg.py",
-        "            e = jnp.where(jnp.abs(left) > jnp.abs(e), left, e)\n",
-        "",
+        "nivpjax/_stepper/departure.py",
+        "return jnp.where(jnp.abs(left) > jnp.abs(e), left, e)",
+        "return e",
         "departure_error: a trapezoidal step ending on a face its row left inside it is "
         "otherwise charged nothing (errors falling like rtol^(1/2) on the sweeping process)",
         ("tests/test_reliability.py::test_departures_from_a_face_keep_the_error_proportional",),

@@ -6,7 +6,7 @@ import jax.numpy as jnp
 from .._nonlinear import AbstractNonlinearSolver
 from .._solution import StepStats
 from .base import AbstractStepper, Stage, StepOutput, chained_stages, default_solver
-from .departure import departure_error
+from .departure import held_row_errors
 
 
 def error_constant(gamma):
@@ -162,13 +162,7 @@ class Bathe(AbstractStepper):
         smooth = bathe_error(g, h, F0, F_mid, F1)
         split = _split_error(model, g, h, (f0, f_mid, f1), (F0, F_mid, F1))
         e = model.to_state(jnp.where(restart, split, smooth))
-        if model.has_arrests:
-            # Rows that came to rest inside the step (friction sticking): their estimate
-            # above measures the jump of their rate, not an error of their value.
-            arrested, stop_error = model.arrest_error(t1, h, y0, y1, f0, f1, args)
-            e = jnp.where(arrested, stop_error, e)
-        left = departure_error(model, t0, h, y0, y1, f0, f1, args)
-        e = jnp.where(jnp.abs(left) > jnp.abs(e), left, e)
+        e = held_row_errors(model, t0, h, y0, y1, f0, f1, e, args)
         if model.has_impulses:
             # An impact inside the step (a contact closed by the end of the first stage,
             # or about to close, and bounced by the second from its start): charge its

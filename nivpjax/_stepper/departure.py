@@ -33,3 +33,17 @@ def departure_error(model, t0, h, y0, y1, f0, f1, args):
     left = rows & held & ~held_end & (r0 * r1 < 0)
     span = jnp.where(left, r1 - r0, 1.0)
     return jnp.where(left, (y1 - y0) - 0.5 * h * r1 * r1 / span, 0.0)
+
+
+def held_row_errors(model, t0, h, y0, y1, f0, f1, e, args):
+    r"""A stepper's estimate `e` (state units) corrected on rows a set starts or stops
+    holding inside the step. Rows that came to rest (friction sticking: a sliding
+    velocity stuck at the end, `Model.arrest_error`) take the projector's arrest
+    estimate: the stepper's measures the jump of their effective rate $f + r$, not an
+    error of their value, which is exact where the slip had ended. Rows a face let go of
+    take the `departure_error` where it is the larger."""
+    if model.has_arrests:
+        arrested, stop_error = model.arrest_error(t0 + h, h, y0, y1, f0, f1, args)
+        e = jnp.where(arrested, stop_error, e)
+    left = departure_error(model, t0, h, y0, y1, f0, f1, args)
+    return jnp.where(jnp.abs(left) > jnp.abs(e), left, e)

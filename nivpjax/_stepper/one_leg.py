@@ -7,7 +7,7 @@ import jax.numpy as jnp
 from .._nonlinear import AbstractNonlinearSolver
 from .._projector import Identity
 from .base import AbstractStepper, StepOutput, default_solver, stats_of
-from .departure import departure_error
+from .departure import held_row_errors
 
 
 def state_rate(model, t, y, F, y0, y1, h, switched, args):
@@ -187,15 +187,10 @@ class _AbstractTheta(AbstractStepper):
         reaction = model.reaction(multipliers)
         e = theta_error(model, self.theta, t0, h, y0, y1, f0, f1, reaction, args)
         e = model.to_state(e)
-        if self.theta < 1.0 and model.has_arrests:
-            # Rows that came to rest inside the step (friction sticking): the defect above
-            # measures the jump of their effective rate f + r, not an error of their
-            # value, which is exact if the slip had ended (as in Bathe's estimate).
-            arrested, stop_error = model.arrest_error(t1, h, y0, y1, f0, f1, args)
-            e = jnp.where(arrested, stop_error, e)
         if self.theta < 1.0:
-            left = departure_error(model, t0, h, y0, y1, f0, f1, args)
-            e = jnp.where(jnp.abs(left) > jnp.abs(e), left, e)
+            # Schemes that weigh the end rates (backward Euler's estimate is its own,
+            # `backward_euler_error`).
+            e = held_row_errors(model, t0, h, y0, y1, f0, f1, e, args)
         return StepOutput(
             y1=y1,
             y_error=e + start_error,
