@@ -41,6 +41,15 @@ class ProjectionContext(eqx.Module):
     - `end_rate`: the rate $y'$ of the differential rows at the end of a step (state
       units, zero on algebraic rows), set with `rate` when the model asks for
       `next_event`; `None` otherwise.
+    - `y_next`, `next_rate`: the state the next step starts from at the end of this
+      one, and its rate (differential rows, state units): the right-limit selections of
+      `start_selection` (a step that ends just short of a relay's switch continues on its
+      far branch) and the switch moved to the start. Set with `end_rate` for projectors
+      with start selections; `None` otherwise.
+    - `after_end`: `True` when a controller asks `next_event` for the first event after
+      the step's end (to size the next step): an event at the end itself, which the next
+      step starts on, is then left out, so that it does not hide the one after it.
+      `False` when a stepper asks for the events inside its step.
     - `tangent`: `True` when the projector is evaluated to linearise a stage at its
       solution (the element of the generalised Jacobian that derivatives use, through the
       implicit function theorem), `False` during the nonlinear iteration. Projectors that
@@ -70,6 +79,9 @@ class ProjectionContext(eqx.Module):
     rate_at: Callable[[Array], Array] | None = None
     start_rate: Float[Array, " n"] | None = None
     end_rate: Float[Array, " n"] | None = None
+    y_next: Float[Array, " n"] | None = None
+    next_rate: Float[Array, " n"] | None = None
+    after_end: bool = eqx.field(static=True, default=False)
     tangent: bool = eqx.field(static=True, default=False)
     law: bool = eqx.field(static=True, default=False)
     tolerance: tuple[Any, Any] | None = None
@@ -240,7 +252,9 @@ class AbstractProjector(eqx.Module):
         estimate) would apply that average once more. A projector may also move a switch
         that the step reaches very early to its start. Returns `(selection, skipped)`:
         `skipped` the time from the step's start to the switch so moved (0 if none; the
-        model charges it to the error estimate). Default: `ctx.y_prev` unchanged, 0."""
+        model shifts the start's differential rows by `skipped` times the jump of the
+        rate, to the state the far branch carries to the exact one at the switch).
+        Default: `ctx.y_prev` unchanged, 0."""
         return ctx.restrict(ctx.y_prev), jnp.zeros((), ctx.y_prev.dtype)
 
     def acts_on(self, n: int) -> np.ndarray:

@@ -163,14 +163,24 @@ class EventLocated(AbstractProjector):
           approach to a sliding surface: the steps it proposed overshot the switch, and
           each overshoot was rejected (the relay at rtol 1e-4: five rejections on the way
           in, 46 attempts in all; 34 with this prediction).
+        - With `saltation`, where the next step starts on another branch (`ctx.y_next`,
+          `ctx.next_rate`: a switch at the end, which `start_selection` moves to that
+          step's start), the zero of the far branch's tangent line from there instead of
+          the quadratic, which would bend with the jump of the rate. A switch at the
+          attempt's start (within `START_SKIP` of it: the start's) is replaced by its
+          surface's next zero ahead, and, with `ctx.after_end`, so is one at its end:
+          the next step starts on it, and the one after it sizes that step. Two relays
+          that take turns (a Filippov spiral) then switch once per step, every step
+          landing on the next switch.
 
         Without the rates (a context that does not carry them), the secant through $s_0$
         and $s_1$. `inf` where nothing is predicted."""
         s0 = self._value(ctx, ctx.t - ctx.h, ctx.y_prev)
         s1 = self._value(ctx, ctx.t, ctx.y_iter)
         own = secant_crossing(s0, s1, ctx.h)
+        ahead = jnp.full_like(own, jnp.inf)
         if ctx.start_rate is not None and ctx.end_rate is not None:
-            own = self._predict(ctx, s0, s1, own)
+            own, ahead = self._predict(ctx, s0, s1, own)
         if self.saltation:
             # A switch this close to the start is the start's (`start_selection` moved it
             # there): predicting it would hide the events the step still holds. With two
@@ -178,7 +188,14 @@ class EventLocated(AbstractProjector):
             # surface 0.043 later reported 1.5e-10, and backward Euler's late-switch
             # charge vanished with it: a Filippov spiral jumped to its Zeno point at
             # t = 0.16 instead of 1.08, `successful`.
-            own = jnp.where(own <= START_SKIP * ctx.h, jnp.inf, own)
+            # Its surface's next switch is predicted from the step's end, as for a
+            # component that did not switch: the spiral's relays take turns, and the one
+            # switched at a step's start is the next step's next event.
+            own = jnp.where(own <= START_SKIP * ctx.h, ahead, own)
+            if ctx.after_end:
+                # A switch at the end (a landing, or a crossing in the step's last
+                # `START_SKIP`) is the next step's start: the one after it sizes that step.
+                own = jnp.where(own >= (1 - START_SKIP) * ctx.h, ahead, own)
         own = jnp.min(own, initial=jnp.inf)
         return jnp.minimum(own, self.projector.next_event(ctx))
 
@@ -188,10 +205,34 @@ class EventLocated(AbstractProjector):
         away0, away1 = _off_surface(s0, s1)
         landed = away0 & ~away1
         reach = jnp.minimum(first_root(s0, ds0, jnp.zeros_like(s0)), h)
-        off = (s0 * s1 > 0) & away0 & away1
-        ahead = h + first_root(s1, ds1, 2 * (ds1 - (s1 - s0) / h) / h)
+        # Off the surface at the end, not crossed inside the step (a start on the
+        # surface, to round-off, is no crossing: the relay switched there).
+        off = away1 & ((s0 * s1 > 0) | ~away0)
+        ahead = h + jnp.where(
+            self._switches_at_end(ctx, ds1),
+            self._ahead_of_switch(ctx, s1, h),
+            first_root(s1, ds1, 2 * (ds1 - (s1 - s0) / h) / h),
+        )
         out = jnp.where(landed & jnp.isfinite(reach), reach, secant)
-        return jnp.where(off, ahead, out)
+        return jnp.where(off, ahead, out), jnp.where(away1, ahead, jnp.inf)
+
+    def _switches_at_end(self, ctx: ProjectionContext, ds1):
+        # Whether the next step starts on another branch than the step ended on (its
+        # start flips a selection, see `start_selection`): the rates of s change there.
+        if ctx.next_rate is None:
+            return jnp.zeros(ds1.shape, bool)
+        return self._along(ctx, ctx.t, ctx.y_next, ctx.next_rate)[1] != ds1
+
+    def _ahead_of_switch(self, ctx: ProjectionContext, s1, h):
+        # After a switch at the end, the tangent line of the far branch from the next
+        # step's start (which a switch moved there has shifted along the jump of the
+        # rate): the quadratic through the step's values would bend with the jump. The
+        # switch the next step starts on (within `START_SKIP` of it) is that step's.
+        if ctx.next_rate is None:
+            return jnp.full_like(s1, jnp.inf)
+        s_next, ds1 = self._along(ctx, ctx.t, ctx.y_next, ctx.next_rate)
+        tau = first_root(s_next, ds1, jnp.zeros_like(s1))
+        return jnp.where(tau <= START_SKIP * h, jnp.inf, tau)
 
     @property
     def has_event_time(self) -> bool:
@@ -313,7 +354,7 @@ class EventLocated(AbstractProjector):
         step = _linalg.solve_or_nan(jnp.where(pair, jac, eye), jnp.where(on, rate, 0.0))
         w = jnp.where(on, self.projector(w0 - step, ctx), w0)
         # The skipped time keeps its derivative (d tau = -d s0 / sdot): the model moves the
-        # start along the jump of the rate by it (zero in value), the saltation term of the
+        # start along the jump of the rate by it (in value too), the saltation term of the
         # switch moved to the start. A start on the surface to round-off carries it too when
         # the selection flips from one boundary point of its set to another (a transversal
         # crossing; the previous stage ended short of the surface, so it carried none): a
@@ -341,15 +382,30 @@ class EventLocated(AbstractProjector):
         s0 = self._value(ctx, ctx.t - ctx.h, ctx.y_prev)
         s1 = self._value(ctx, ctx.t, ctx.y_iter)
         crossed = s0 * s1 < 0
-        size = jnp.where(crossed, jnp.minimum(jnp.abs(s0), jnp.abs(s1)), 0.0)
         if ctx.start_rate is not None and ctx.end_rate is not None:
             ds0, ds1 = self._end_rates(ctx)
+            crossed = crossed & ~self._switched_at_start(ctx, s0, ds0)
+        size = jnp.where(crossed, jnp.minimum(jnp.abs(s0), jnp.abs(s1)), 0.0)
+        if ctx.start_rate is not None and ctx.end_rate is not None:
             away0, away1 = _off_surface(s0, s1)
             away = away0 & away1
             excursion = hermite_excursion(s0, s1, ctx.h * ds0, ctx.h * ds1)
             size = jnp.maximum(size, jnp.where(away, excursion, 0.0))
         own = jnp.max(size, initial=0.0).astype(ctx.y_iter.dtype)
         return jnp.maximum(own, self.projector.violation(ctx))
+
+    def _switched_at_start(self, ctx: ProjectionContext, s0, ds0):
+        # With `saltation`, the switches `start_selection` moves to the step's start (the
+        # start's tangent reaches the surface within `START_SKIP` of the step): the step
+        # starts on their far branch, from the state shifted to match, so crossing them
+        # is no error. Counted, a step landing 1e-8 of its size short of a switch
+        # crossed it by that much, at every step size: above a tolerance of 1e-8, every
+        # retry was rejected until `h_min`.
+        if not self.saltation:
+            return jnp.zeros(s0.shape, bool)
+        approaching = s0 * ds0 < 0
+        delay = -s0 / jnp.where(approaching, ds0, 1.0)
+        return approaching & (delay <= START_SKIP * ctx.h)
 
 
 def _off_surface(s0, s1):
