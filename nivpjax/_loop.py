@@ -349,7 +349,9 @@ def _events(model, stepper, s, h_try, out, args, tolerance):
         zero = jnp.zeros((), out.y1.dtype)
         return zero, jnp.full((), jnp.inf, out.y1.dtype)
     violation = model.violation(s.t + h_try, h_try, s.y, out.y1, args, tolerance)
-    next_event = model.next_event(s.t + h_try, h_try, s.y, out.y1, args, after_end=True)
+    next_event = model.next_event(
+        s.t + h_try, h_try, s.y, out.y1, args, after_end=True, tolerance=tolerance
+    )
     exit_violation, exit_time = model.held_exit(s.t + h_try, h_try, s.y, out.y1, args)
     return jnp.maximum(violation, exit_violation), jnp.minimum(next_event, exit_time)
 

@@ -735,10 +735,11 @@ class Model(eqx.Module):
         rate1 = self._rate(t1, y1, args)
         return _held.held_exit(self, t1, h, y0, y1, rate0, rate1, args)
 
-    def next_event(self, t1, h, y0, y1, args, after_end=False):
+    def next_event(self, t1, h, y0, y1, args, after_end=False, tolerance=None):
         """Predicted time from `t1 - h` to the first event (see
         `AbstractProjector.next_event`); with `after_end`, the first after the step's
-        end (`ProjectionContext.after_end`: what a controller sizes the next step by)."""
+        end that matters under the controller's `tolerance` (`ProjectionContext.after_end`:
+        what a controller sizes the next step by)."""
         rate = self.f(t1, y1, args)
         y0, start_rate, y_next, next_rate = self._predicting_rates(t1, h, y0, y1, args)
         ctx = self._context(
@@ -753,6 +754,7 @@ class Model(eqx.Module):
             y_next=y_next,
             next_rate=next_rate,
             after_end=after_end,
+            tolerance=tolerance,
         )
         return jax.lax.stop_gradient(self.projector.next_event(ctx))
 

@@ -48,7 +48,8 @@ class ProjectionContext(eqx.Module):
       with start selections; `None` otherwise.
     - `after_end`: `True` when a controller asks `next_event` for the first event after
       the step's end (to size the next step): an event at the end itself, which the next
-      step starts on, is then left out, so that it does not hide the one after it.
+      step starts on, is then left out, so that it does not hide the one after it, and
+      so is one the state reaches within a fraction of the controller's `tolerance`.
       `False` when a stepper asks for the events inside its step.
     - `tangent`: `True` when the projector is evaluated to linearise a stage at its
       solution (the element of the generalised Jacobian that derivatives use, through the
@@ -62,7 +63,8 @@ class ProjectionContext(eqx.Module):
       is no smooth reaction (its holding part would be read as a force that the
       impact's flight never has).
     - `tolerance`: `(rtol, atol)` of the controller that judges a step's `violation`
-      (`None` elsewhere, and under a controller without tolerances). The violation is
+      or sizes the next step by `next_event` (`None` elsewhere, and under a controller
+      without tolerances). The violation is
       charged against `nivpjax._norms.violation_scale`, the start
       state's scale; a projector whose violation has a scale of its own converts it with
       these (a contact's penetration is judged like an error in its gap).
