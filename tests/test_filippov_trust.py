@@ -175,6 +175,9 @@ def test_spiral_through_zeno_point(name, S, a, tight):
         # (the start takes it), rejected at every step size if counted.
         assert err <= 1e-2 * rtol, (rtol, err)
         assert int(sol.n_rejected) <= max(2, k // 100), (rtol, k, int(sol.n_rejected))
+        # Switchings within tolerance of the origin are stepped over, not landed on.
+        atol = rtol / 100
+        assert np.sum((V > 0) & (V < 1e-2 * atol)) <= 2, np.sort(V[V > 0])[:5]
         errors.append(err)
     assert errors[1] <= max(errors[0] / 5, 1e-12), errors
 
