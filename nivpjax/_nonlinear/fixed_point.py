@@ -143,19 +143,22 @@ class FixedPointVI(AbstractNonlinearSolver):
         def _remember(memory, y, y_bar, alpha, finite):
             # The pair (y, y_bar = T_alpha(y)) joins the last ones at the same alpha (a
             # new alpha is a new map: the memory restarts).
-            Ys, Gs, count, alpha_memory = memory
+            # A ring: the rows' order does not matter to the extrapolation.
+            Ys, Gs, count, slot, alpha_memory = memory
             if self.anderson == 0:
                 return memory
-            count = jnp.where(alpha == alpha_memory, count, 0)
-            Ys = jnp.where(finite, jnp.roll(Ys, 1, axis=0).at[0].set(y), Ys)
-            Gs = jnp.where(finite, jnp.roll(Gs, 1, axis=0).at[0].set(y_bar), Gs)
+            same = alpha == alpha_memory
+            count, slot = jnp.where(same, count, 0), jnp.where(same, slot, 0)
+            Ys = Ys.at[slot].set(jnp.where(finite, y, Ys[slot]))
+            Gs = Gs.at[slot].set(jnp.where(finite, y_bar, Gs[slot]))
             count = jnp.where(finite, jnp.minimum(count + 1, self.anderson), count)
-            return Ys, Gs, count, alpha
+            slot = jnp.where(finite, (slot + 1) % self.anderson, slot)
+            return Ys, Gs, count, slot, alpha
 
         def _accelerated(memory, alpha, den, allowed):
             # Anderson's extrapolation from the memory and its predictor; `use` where
             # its natural residual is below y's (`den`).
-            Ys, Gs, count, _ = memory
+            Ys, Gs, count, _, _ = memory
             if self.anderson == 0:
                 return y0, y0, y0, jnp.zeros((), bool)
             y_a = _anderson(Ys, Gs, count, 1 / rho)
@@ -171,7 +174,7 @@ class FixedPointVI(AbstractNonlinearSolver):
         history = init_history(self.max_steps, y0.dtype, jnp.nan)
         state = (y0, R0, y_bar0, R_bar0, alpha, jnp.array(0), history, jnp.array(False))
         empty = jnp.zeros((self.anderson,) + y0.shape, y0.dtype)
-        memory = (empty, empty, jnp.array(0), alpha)
+        memory = (empty, empty, jnp.array(0), jnp.array(0), alpha)
         (y, *_, k, history, _), _ = lax.while_loop(cond, body, (state, memory))
         return y, (k.astype(y.dtype), history, jnp.zeros((), y.dtype))
 
