@@ -1063,8 +1063,8 @@ MUTANTS = [
         "events_land_after_acceptance_from_t0",
         "events",
         C + "events.py",
-        "to_event = info.next_event - jnp.where(accept, info.h, 0.0)",
-        "to_event = info.next_event",
+        "to_event = jnp.where(accept, info.next_event_after_end - info.h, info.next_event)",
+        "to_event = jnp.where(accept, info.next_event_after_end, info.next_event)",
         "land_before_event's docstring: after an acceptance the next step starts at t0 + h",
         (
             TEV + "test_zeno_ball_impacts_at_step_boundaries",
@@ -1916,11 +1916,11 @@ MUTANTS = [
         "end_switch_hides_the_next",
         "projectors",
         P + "located.py",
-        "own = jnp.where(own >= (1 - START_SKIP) * ctx.h, ahead, own)",
+        "own = jnp.where(own <= end, ahead, own)",
         "own = own",
-        "EventLocated.next_event with after_end: a switch at the attempt's end is the next "
-        "step's start, and the one after it sizes that step (else up to five attempts per "
-        "switch of a spiral)",
+        "EventLocated.next_event with after_end: a switch inside the attempt or at its end "
+        "is past, and its surface's next one sizes the next step (else up to five attempts "
+        "per switch of a spiral)",
         ("tests/test_filippov_trust.py::test_spiral_through_zeno_point",),
     ),
     Mutant(
@@ -1931,6 +1931,18 @@ MUTANTS = [
         "self._switches_at_end(ctx, ds1) & False,",
         "EventLocated._predict: after a switch at the end, the far branch's tangent line "
         "from the next step's start, not the quadratic through the step's values",
+        ("tests/test_filippov_trust.py::test_spiral_through_zeno_point",),
+    ),
+    Mutant(
+        "accepted_step_sized_by_the_crossed_event",
+        "events",
+        C + "events.py",
+        "to_event = jnp.where(accept, info.next_event_after_end - info.h, info.next_event)",
+        "to_event = info.next_event - jnp.where(accept, info.h, 0.0)",
+        "land_before_event: after an acceptance the first event after the attempt's end "
+        "sizes the next step; a switch the attempt crossed hid it, and a spiral's steps "
+        "crossed one switch each in a cycle that did not approach the origin (reference "
+        "controller options)",
         ("tests/test_filippov_trust.py::test_spiral_through_zeno_point",),
     ),
     Mutant(

@@ -265,7 +265,9 @@ def _advance(s: _LoopState, model, stepper, controller, t1, args, error_mask, pr
     h_try = jax.lax.stop_gradient(h_try)
     out = stepper.step(model, s.t, h_try, s.y, args)
     y_error = jnp.zeros_like(out.y1) if out.y_error is None else out.y_error
-    violation, next_event = _events(model, stepper, s, h_try, out, args, controller.tolerances())
+    violation, next_event, after_end = _events(
+        model, stepper, s, h_try, out, args, controller.tolerances()
+    )
     info = StepInfo(
         t0=s.t,
         h=h_try,
@@ -278,6 +280,7 @@ def _advance(s: _LoopState, model, stepper, controller, t1, args, error_mask, pr
         error_mask=error_mask,
         violation=violation,
         next_event=next_event,
+        event_after_end=after_end,
     )
     accept, h_next, controller_state = controller.adapt(info, s.controller_state)
     accept = accept & jnp.all(jnp.isfinite(out.y1))
@@ -341,19 +344,28 @@ def _advance(s: _LoopState, model, stepper, controller, t1, args, error_mask, pr
 
 
 def _events(model, stepper, s, h_try, out, args, tolerance):
-    # `(violation, next_event)` of an attempt for the controller: a constraint crossed
-    # without being enforced (in the units of `violation_scale` under the controller's
-    # `tolerance`), and the predicted time to the next event (held exits included); none
-    # for a stepper that locates events itself.
+    # `(violation, next_event, after_end)` of an attempt for the controller: a constraint
+    # crossed without being enforced (in the units of `violation_scale` under the
+    # controller's `tolerance`), and the predicted times to the next event (held exits
+    # included) and to the first after the attempt's end (`StepInfo.event_after_end`);
+    # none for a stepper that locates events itself.
     if stepper.locates_events:
         zero = jnp.zeros((), out.y1.dtype)
-        return zero, jnp.full((), jnp.inf, out.y1.dtype)
-    violation = model.violation(s.t + h_try, h_try, s.y, out.y1, args, tolerance)
-    next_event = model.next_event(
-        s.t + h_try, h_try, s.y, out.y1, args, after_end=True, tolerance=tolerance
-    )
-    exit_violation, exit_time = model.held_exit(s.t + h_try, h_try, s.y, out.y1, args)
-    return jnp.maximum(violation, exit_violation), jnp.minimum(next_event, exit_time)
+        none = jnp.full((), jnp.inf, out.y1.dtype)
+        return zero, none, none
+    t1 = s.t + h_try
+    violation = model.violation(t1, h_try, s.y, out.y1, args, tolerance)
+    next_event = model.next_event(t1, h_try, s.y, out.y1, args)
+    exit_violation, exit_time = model.held_exit(t1, h_try, s.y, out.y1, args)
+    next_event = jnp.minimum(next_event, exit_time)
+    after_end = next_event
+    if model.projector.has_start_selection:
+        # Only a relay's prediction tells the two apart (`ProjectionContext.after_end`).
+        after_end = model.next_event(
+            t1, h_try, s.y, out.y1, args, after_end=True, tolerance=tolerance
+        )
+        after_end = jnp.minimum(after_end, jnp.where(exit_time > h_try, exit_time, jnp.inf))
+    return jnp.maximum(violation, exit_violation), next_event, after_end
 
 
 def _fill_eval(model, t_eval, ta, ya, tb, yb, final, args, y_eval, stepper=None):

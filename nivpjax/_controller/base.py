@@ -27,6 +27,11 @@ class StepInfo(eqx.Module):
       closing, a switching function crossing zero) that the projector foresees from the
       data at both ends of the attempt, inside the attempt or beyond it; `inf` when none
       is predicted (see [`nivpjax.AbstractProjector.next_event`][]).
+    - `event_after_end`: the same, of the first event after the attempt's end (what sizes
+      the next step if this one is accepted): events inside the attempt, which it
+      crossed, and at its end, which the next step starts on, are left out
+      (`ProjectionContext.after_end`); equal to `next_event` where the projector makes
+      no such difference.
     """
 
     t0: Float[Array, ""]
@@ -40,6 +45,12 @@ class StepInfo(eqx.Module):
     error_mask: Bool[Array, " n"]
     violation: Float[Array, ""]
     next_event: Float[Array, ""]
+    event_after_end: Float[Array, ""] | None = None
+
+    @property
+    def next_event_after_end(self):
+        """`event_after_end`, or `next_event` where it is not given."""
+        return self.next_event if self.event_after_end is None else self.event_after_end
 
 
 class AbstractController(eqx.Module):

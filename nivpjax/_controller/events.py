@@ -37,9 +37,11 @@ def event_margin(margin, rtol):
 
 def land_before_event(info: StepInfo, accept, ok, h_next, margin):
     r"""Shorten the proposed step `h_next` so that it ends a relative `margin` short of the
-    event the projector predicts (`info.next_event`, measured from `info.t0`).
+    event the projector predicts (measured from `info.t0`).
 
-    - After an acceptance the next step starts at `t0 + h`; after a rejection, at `t0`.
+    - After an acceptance the next step starts at `t0 + h`, and the first event after the
+      attempt's end counts (`info.next_event_after_end`); after a rejection, at `t0`
+      (`info.next_event`).
     - A step that would start within `EVENT_SKIP` of its size from the event steps over it:
       the event then sits at the start of the step, where the scheme resolves it.
     - A rejected attempt that crossed the event before its last `EVENT_SKIP` is retried up
@@ -47,7 +49,7 @@ def land_before_event(info: StepInfo, accept, ok, h_next, margin):
       the crossing); one that crossed it later is left to the error-controlled factor.
 
     No prediction (`inf`) leaves `h_next` unchanged; the result carries no gradient."""
-    to_event = info.next_event - jnp.where(accept, info.h, 0.0)
+    to_event = jnp.where(accept, info.next_event_after_end - info.h, info.next_event)
     # In the step's dtype: a margin computed from a float64 rtol must not promote a
     # float32 solve's step size.
     land = jax.lax.stop_gradient((to_event * (1 - margin)).astype(to_event.dtype))

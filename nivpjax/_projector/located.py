@@ -196,10 +196,12 @@ class EventLocated(AbstractProjector):
             # switched at a step's start is the next step's next event.
             own = jnp.where(own <= START_SKIP * ctx.h, ahead, own)
             if ctx.after_end:
-                # A switch at the end (a landing, or a crossing in the step's last
-                # `START_SKIP`) is the next step's start: the one after it sizes that step.
-                own = jnp.where(own >= (1 - START_SKIP) * ctx.h, ahead, own)
-                own = jnp.where(self._negligible(ctx, own), jnp.inf, own)
+                # A switch inside the attempt (crossed) or at its end (a landing, or within
+                # `START_SKIP` of it: the next step's start takes it) is past: the one
+                # after it sizes the next step.
+                end = (1 + START_SKIP) * ctx.h
+                own = jnp.where(own <= end, ahead, own)
+                own = jnp.where((own <= end) | self._negligible(ctx, own), jnp.inf, own)
         own = jnp.min(own, initial=jnp.inf)
         return jnp.minimum(own, self.projector.next_event(ctx))
 
