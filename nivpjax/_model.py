@@ -560,11 +560,11 @@ class Model(eqx.Module):
     def step_start(self, t0, h, y0, args):
         """The start of a step of size `h` as every stepper takes it: the impacts closing
         there applied (`apply_impacts`), then the right-limit selections (`start_state`).
-        Returns the start state, the rate there, and the local error of the impact's
-        timing (a switch moved to the start shifts the state instead: `start_state`)."""
+        Returns the start state, the rate there, and the local error both charge (the
+        impact's timing; a switch moved to the start, where `start_state` charges it)."""
         y0, impact_error = self.apply_impacts(t0, h, y0, args)
-        y0, f0 = self.start_state(t0, h, y0, args)
-        return y0, f0, impact_error
+        y0, f0, start_error = self.start_state(t0, h, y0, args)
+        return y0, f0, impact_error + start_error
 
     def start_state(self, t0, h, y0, args):
         """`y0` with the right-limit selections at the start of a step of size `h` (see
@@ -575,7 +575,7 @@ class Model(eqx.Module):
             y0 = _held.held_start(self, t0, h, y0, args)
         f0 = self.f(t0, y0, args)
         if not self.projector.has_start_selection:
-            return y0, f0
+            return y0, f0, jnp.zeros_like(y0)
         ctx = self._context(t0 + h, h, y0, y0, args, rate_at=lambda y: self._rate(t0, y, args))
         selection, skipped = self.projector.start_selection(ctx)
         y0_start = jnp.where(self.algebraic, selection, y0)
@@ -589,8 +589,15 @@ class Model(eqx.Module):
         # local error fixed by the controller's margin, not by h: a Filippov spiral's
         # 20 000 switchings added up to 1.7e-5 V0 at every rtol, and at rtol 1e-8 a step
         # landing 1e-8 of its size short of a switch was rejected at every size.
+        if self.has_impulses:
+            # With contacts the shift stays charged as an error, carried in derivatives
+            # only, as before: shifting a contact's positions in value has not been
+            # measured against its gap (a shift could open or close it).
+            delta = skipped - jax.lax.stop_gradient(skipped)
+            error = jax.lax.stop_gradient(skipped * jump)
+            return jnp.where(self.algebraic, y0_start, y0_start + jump * delta), f0_start, error
         y0_start = jnp.where(self.algebraic, y0_start, y0_start + jump * skipped)
-        return y0_start, f0_start
+        return y0_start, f0_start, jnp.zeros_like(y0)
 
     def consistent_initial_state(self, solver, t0, h, y0, args):
         r"""Consistent algebraic rows at $t_0$, and an initial state outside the admissible
@@ -771,7 +778,7 @@ class Model(eqx.Module):
             y0 = jax.lax.stop_gradient(self.apply_impacts(t1 - h, h, y0, args)[0])
             return y0, self._rate(t1 - h, y0, args), None, None
         y0, f0, _ = jax.lax.stop_gradient(self.step_start(t1 - h, h, y0, args))
-        y_next, f1 = jax.lax.stop_gradient(self.start_state(t1, h, y1, args))
+        y_next, f1, _ = jax.lax.stop_gradient(self.start_state(t1, h, y1, args))
         return y0, self.to_state(f0), y_next, self.to_state(f1)
 
     @property

@@ -24,7 +24,11 @@ ALPHA = 8.0
 @pytest.fixture(scope="module")
 def env():
     # A capped VI solver: the largest steps fail to converge, so rejections are reachable.
-    stepper = nj.Bathe(solver=nj.FixedPointVI(max_steps=30))
+    # Without Anderson acceleration: its choice between the extrapolation and the move
+    # compares two residuals, which rounding can tip differently in the batched and the
+    # single programs, and an unconverged stage keeps that difference (8.6e-6 of a
+    # reward, against the 1e-6 to which these tests compare the two).
+    stepper = nj.Bathe(solver=nj.FixedPointVI(max_steps=30, anderson=0))
     task = fault.fault_task(DATA / "kijs_2x2elem-3x3length.npy", stepper=stepper, max_steps=50)
     return fault.FaultEnv(task)
 

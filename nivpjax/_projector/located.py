@@ -387,6 +387,10 @@ class EventLocated(AbstractProjector):
         tau = -s0 / jnp.where(flips, rate, 1.0)
         tau = jax.lax.stop_gradient(jnp.abs(tau)) + tau - jax.lax.stop_gradient(tau)
         skipped = jnp.where(on & ~at, delay, jnp.where(flips, tau, 0.0))
+        # The model shifts the start by the skipped time in value: a flip at round-off
+        # whose rate is tiny would give a time far beyond the step. No switch is moved
+        # from further than `START_SKIP` of the step.
+        skipped = jnp.where(jnp.abs(skipped) <= START_SKIP * ctx.h, skipped, 0.0)
         # The largest by indexing, so that the derivative of a value of 0 (on the surface)
         # is not halved by a tie, as `max` would.
         return w, skipped[jnp.argmax(skipped)]
