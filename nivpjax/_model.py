@@ -742,13 +742,15 @@ class Model(eqx.Module):
         rate1 = self._rate(t1, y1, args)
         return _held.held_exit(self, t1, h, y0, y1, rate0, rate1, args)
 
-    def next_event(self, t1, h, y0, y1, args, after_end=False, tolerance=None):
+    def next_event(self, t1, h, y0, y1, args, after_end=False, tolerance=None, started=False):
         """Predicted time from `t1 - h` to the first event (see
         `AbstractProjector.next_event`); with `after_end`, the first after the step's
         end that matters under the controller's `tolerance` (`ProjectionContext.after_end`:
-        what a controller sizes the next step by)."""
+        what a controller sizes the next step by). `started`: `y0` is already the step's
+        start (`step_start`), and only events inside the step are wanted (a stepper's
+        estimate), so neither the start nor the next step's start is worked out again."""
         rate = self.f(t1, y1, args)
-        y0, start_rate, y_next, next_rate = self._predicting_rates(t1, h, y0, y1, args)
+        y0, start_rate, y_next, next_rate = self._predicting_rates(t1, h, y0, y1, args, started)
         ctx = self._context(
             t1,
             h,
@@ -765,7 +767,7 @@ class Model(eqx.Module):
         )
         return jax.lax.stop_gradient(self.projector.next_event(ctx))
 
-    def _predicting_rates(self, t1, h, y0, y1, args):
+    def _predicting_rates(self, t1, h, y0, y1, args, started=False):
         # `(y0, start_rate, y_next, next_rate)` for `next_event`, every projector (the switching
         # functions' predictions read both rates; contacts read the start's as well). The
         # start as the step takes it (`step_start`: impacts applied, and the selections a
@@ -773,8 +775,9 @@ class Model(eqx.Module):
         # short of a relay's switch read the rate of the branch it was leaving, and
         # predicted no switch of the other relay the far branch drives to its surface
         # (a Filippov spiral: five attempts per quadrant, at most one is needed). The
-        # next step's start likewise (`start_state` at the end) for the prediction ahead.
-        if not self.projector.has_start_selection:
+        # next step's start likewise (`start_state` at the end) for the prediction ahead,
+        # which a stepper (`started`: events inside its step only) does not read.
+        if started or not self.projector.has_start_selection:
             y0 = jax.lax.stop_gradient(self.apply_impacts(t1 - h, h, y0, args)[0])
             return y0, self._rate(t1 - h, y0, args), None, None
         y0, f0, _ = jax.lax.stop_gradient(self.step_start(t1 - h, h, y0, args))

@@ -331,7 +331,7 @@ def test_an_event_predicted_at_the_end_of_a_step_up_to_rounding_lies_inside_it()
     class Predicts(eqx.Module):
         tau: jax.Array
 
-        def next_event(self, t1, h, y0, y1, args):
+        def next_event(self, t1, h, y0, y1, args, started=False):
             return self.tau
 
     h, y = jnp.asarray(0.1), jnp.zeros(1)

@@ -128,9 +128,9 @@ def late_switch_error(model, t0, h, y0, y1, f0, args):
 
 
 def event_in_step(model, t0, h, y0, y1, args):
-    """The predicted time from `t0` of the first event inside the step (`Model.next_event`),
-    0 where none is predicted inside it."""
-    tau = model.next_event(t0 + h, h, y0, y1, args)
+    """The predicted time from `t0` of the first event inside the step (`Model.next_event`
+    from the step's own start `y0`), 0 where none is predicted inside it."""
+    tau = model.next_event(t0 + h, h, y0, y1, args, started=True)
     # A step that lands on the surface has its event at the end, tau = h up to the
     # rounding of the secant (measured one ulp above h for a step jumping onto a sliding
     # set, which a strict `tau <= h` left uncharged: a successful run with its sliding
