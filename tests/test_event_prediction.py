@@ -333,3 +333,36 @@ def test_a_late_kink_takes_the_start_branch_derivative():
 
     assert derivative(1.0, -0.1) == 1.0
     assert derivative(0.1, -1.0) == 0.0
+
+
+def test_a_switch_crossed_by_an_accepted_step_is_past():
+    """`EventLocated.next_event` with `after_end` (the controller sizing the step after
+    an acceptance): a relay's switch that the step crossed is past, and the next zero of
+    its surface sizes the next step. Here s(t, y) = y crosses inside a step of size 1
+    (s0 = 1, s1 = -0.2) and turns back (s1' = 0.6): the quadratic with q(-1) = s0,
+    q(0) = s1, q'(0) = s1' is -0.2 + 0.6 tau + 1.8 tau^2, zero at tau = (sqrt(1.8) -
+    0.6) / 3.6 after the end. Within the attempt (no `after_end`, a rejected attempt's
+    retry) the crossing itself, the secant's zero 1 / 1.2."""
+    import jax.numpy as jnp
+
+    from nivpjax._projector.base import ProjectionContext
+
+    relay = nj.EventLocated(nj.SignResolvent([0], [1]), lambda t, y, a: y[:1], saltation=True)
+    one = jnp.ones(2)
+
+    def event(after_end):
+        ctx = ProjectionContext(
+            t=jnp.asarray(1.0),
+            h=jnp.asarray(1.0),
+            y_prev=jnp.array([1.0, 1.0]),
+            y_iter=jnp.array([-0.2, -1.0]),
+            rho=one,
+            args=None,
+            start_rate=jnp.array([-1.0, 0.0]),
+            end_rate=jnp.array([0.6, 0.0]),
+            after_end=after_end,
+        )
+        return float(relay.next_event(ctx))
+
+    np.testing.assert_allclose(event(True), 1.0 + (np.sqrt(1.8) - 0.6) / 3.6, rtol=1e-12)
+    np.testing.assert_allclose(event(False), 1.0 / 1.2, rtol=1e-12)
