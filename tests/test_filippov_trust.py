@@ -286,3 +286,35 @@ def test_held_step_sees_an_excursion_of_the_equivalent_control_between_its_ends(
     np.testing.assert_allclose(time, 1 / 9, rtol=1e-12)
     violation, time = held_exit(jnp.asarray(2.0))
     assert float(violation) == 0.0 and float(time) == np.inf
+
+
+@pytest.mark.parametrize("solver", [nj.SemismoothNewton, nj.FixedPointVI])
+def test_a_tiny_stage_on_the_sliding_surface_converges_at_round_off(solver):
+    # A backward Euler stage of super-twisting from a state on its sliding surface
+    # (sigma = x2 + x1 = 0, at x = 0.05, w at -1), where the run's steps had fallen. The
+    # selection's row is scaled by rho = 1/h, and its residual sigma(x) carries a
+    # round-off of about eps |x|: the natural residual cannot fall below eps |x| / h (at
+    # h = 1e-11, 3.5e-6; the stage's tolerance is 1e-8). The VI method stopped there and
+    # ran out of iterations at every step size below about 1e-10, and the run's steps
+    # fell to 1e-12 until max_steps (c = 1, L = 1.5, Bathe, rtol 1e-2); now that floor,
+    # eps |J| |y|| of the residual's terms, counts as round-off (`residual_scale`).
+    from nivpjax._model import Model
+
+    scene, _, args = nj.scenes.super_twisting(c=1.0, lipschitz=1.5)
+    mass = scene.full_mass_matrix
+    model = Model.build(
+        scene.vector_field,
+        scene.projector,
+        mass,
+        np.asarray(mass.diagonal() == 0),
+        equation_rows=scene.equation_rows,
+    )
+    y0 = jnp.array([0.04985554, -0.04985554, 0.25222612, -1.0])
+    stepper = nj.BackwardEuler(solver=solver())
+    step = jax.jit(lambda h: stepper.step(model, 2.36520074, h, y0, args))
+    for h in (1e-12, 1e-11):
+        out = step(jnp.asarray(h))
+        assert out.stats.nonlinear_result == nj.RESULTS.successful, h
+        # The state moves by h y' at most (|y'| < 2 here), the selection stays in its set.
+        np.testing.assert_allclose(out.y1[:3], y0[:3], rtol=0, atol=2 * h + 1e-16)
+        assert abs(float(out.y1[3])) <= 1.0

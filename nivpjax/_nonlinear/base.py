@@ -98,6 +98,17 @@ def scaled_error(G_value, y, rtol, atol, z=None):
     return jnp.max(jnp.abs(G_value) / scale, initial=0.0)
 
 
+def residual_scale(residual, y):
+    r"""$|J\,|y||$, $J$ the residual's Jacobian at $y$: the size of the terms the
+    residual adds up, whose round-off bounds how small it can be made. A multiplier's
+    row scaled by $\rho = 1/h$ (a relay's selection, whose residual is its switching
+    function $\sigma(x)$) has a natural residual that round-off in $\sigma$ alone keeps
+    at about $\varepsilon |x| / h$: at $h = 10^{-11}$ on super-twisting's sliding surface
+    (x = 0.05, $\sigma = x_2 + x_1$) 3.5e-6, far above the stage's tolerance, and every
+    solve ran out of iterations until the run's steps did."""
+    return jnp.abs(jax.jvp(residual, (y,), (jnp.abs(y),))[1])
+
+
 # A stage's nonlinear solve is held at least this much tighter than the step's error
 # control (`AbstractNonlinearSolver.within`): its error then stays far below the local error
 # the controller accepts. At a solver's own default 1e-8 and a controller's rtol 1e-8, the
@@ -243,7 +254,9 @@ class AbstractNonlinearSolver(eqx.Module):
         y_nd = lax.stop_gradient(y)
         G_final = lax.stop_gradient(G_y)
         norm = jnp.max(jnp.abs(G_final), initial=0.0)
-        converged = scaled_error(G_final, y_nd, rtol, atol, lax.stop_gradient(z)) <= 1
+        # The round-off floor: z's, and that of rho R's terms (`residual_scale`).
+        floor = jnp.abs(lax.stop_gradient(z)) + rho * residual_scale(residual, y_nd)
+        converged = scaled_error(G_final, y_nd, rtol, atol, floor) <= 1
         finite = jnp.all(jnp.isfinite(y_nd)) & jnp.isfinite(norm)
         result = RESULTS.where(
             converged & finite,

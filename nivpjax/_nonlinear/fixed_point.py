@@ -8,7 +8,7 @@ from jax import lax
 from .. import _linalg
 from .._custom_types import plain_int
 from .._linear import AbstractLinearSolver, AutoLinear
-from .base import AbstractNonlinearSolver, init_history, scaled_error
+from .base import AbstractNonlinearSolver, init_history, residual_scale, scaled_error
 
 
 class FixedPointVI(AbstractNonlinearSolver):
@@ -93,7 +93,9 @@ class FixedPointVI(AbstractNonlinearSolver):
             natural = step / jnp.minimum(1.0, alpha)
             finite = jnp.all(jnp.isfinite(y_bar)) & jnp.all(jnp.isfinite(R_bar))
             # Never stop at the initial guess (see SemismoothNewton): move at least once.
-            argument = (y - alpha * rho * R) / jnp.minimum(1.0, alpha)  # natural's scale
+            argument = (jnp.abs(y - alpha * rho * R) + alpha * rho * noise) / jnp.minimum(
+                1.0, alpha
+            )  # natural's scale, with the round-off of rho R
             done = finite & (k > 0) & (scaled_error(natural, y, rtol, atol, argument) <= 1)
             den = wnorm(step, 1 / rho)
             L = alpha * wnorm(R_bar - R, rho) / jnp.where(den > tiny, den, 1.0)
@@ -170,6 +172,7 @@ class FixedPointVI(AbstractNonlinearSolver):
 
         alpha = jnp.asarray(self.alpha0, y0.dtype)
         R0 = residual(y0)
+        noise = residual_scale(residual, y0)
         y_bar0, R_bar0 = predictor(y0, R0, alpha)
         history = init_history(self.max_steps, y0.dtype, jnp.nan)
         state = (y0, R0, y_bar0, R_bar0, alpha, jnp.array(0), history, jnp.array(False))
