@@ -1977,6 +1977,31 @@ MUTANTS = [
         "_anderson: the coefficients sum to one (else the extrapolation is 0)",
         ("tests/test_filippov_trust.py::test_spiral_through_zeno_point_with_the_vi_method",),
     ),
+    Mutant(
+        "vi_stops_above_the_residual_round_off",
+        "nonlinear",
+        N + "fixed_point.py",
+        "floor = jnp.abs(argument) + alpha * rho * noise / jnp.minimum(1.0, alpha)",
+        "floor = jnp.abs(argument)",
+        "FixedPointVI stops, once stalled, at the round-off of rho R's terms: a selection "
+        "row scaled by 1/h cannot fall below eps |x| / h",
+        (
+            "tests/test_filippov_trust.py::test_a_tiny_stage_on_the_sliding_surface_converges_at_round_off"
+            + "[FixedPointVI]",
+        ),
+    ),
+    Mutant(
+        "final_check_above_the_residual_round_off",
+        "nonlinear",
+        N + "base.py",
+        "floor = jnp.abs(lax.stop_gradient(z)) + rho * residual_scale(residual, y_nd)",
+        "floor = jnp.abs(lax.stop_gradient(z))",
+        "AbstractNonlinearSolver.solve's final check counts the round-off of rho R's terms",
+        (
+            "tests/test_filippov_trust.py::test_a_tiny_stage_on_the_sliding_surface_converges_at_round_off"
+            + "[FixedPointVI]",
+        ),
+    ),
 ]
 
 # Equivalent mutants, excluded from the list and the score (standard practice: a mutant no

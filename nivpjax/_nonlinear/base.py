@@ -86,6 +86,9 @@ def linearised_natural_map(residual: Residual, project: Project, rho, y, z):
 # alternated between that point and 4e4 for its 50 iterations and the run failed at its
 # start. Elsewhere |z| is about |y| and the floor lies far below the tolerance.
 ROUNDOFF_ULPS = 16
+# The round-off of a residual's terms, in ulps of their size (`residual_scale`; a bound,
+# the terms' magnitudes already add up).
+RESIDUAL_ULPS = 4
 
 
 def scaled_error(G_value, y, rtol, atol, z=None):
@@ -106,7 +109,7 @@ def residual_scale(residual, y):
     at about $\varepsilon |x| / h$: at $h = 10^{-11}$ on super-twisting's sliding surface
     (x = 0.05, $\sigma = x_2 + x_1$) 3.5e-6, far above the stage's tolerance, and every
     solve ran out of iterations until the run's steps did."""
-    return jnp.abs(jax.jvp(residual, (y,), (jnp.abs(y),))[1])
+    return (RESIDUAL_ULPS / ROUNDOFF_ULPS) * jnp.abs(jax.jvp(residual, (y,), (jnp.abs(y),))[1])
 
 
 # A stage's nonlinear solve is held at least this much tighter than the step's error

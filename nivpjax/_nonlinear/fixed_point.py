@@ -11,6 +11,14 @@ from .._linear import AbstractLinearSolver, AutoLinear
 from .base import AbstractNonlinearSolver, init_history, residual_scale, scaled_error
 
 
+# The iteration stops at the round-off floor of its residual (`residual_scale`) once its
+# natural residual has not fallen below STALL_FACTOR of its best for STALL_ITERATIONS: the
+# floor is a bound, and an iteration still converging goes on to the tolerance (a stiff
+# spring's contact force: 6e-11 of itself there, 7e-9 when stopped at the floor).
+STALL_FACTOR = 0.9
+STALL_ITERATIONS = 8
+
+
 class FixedPointVI(AbstractNonlinearSolver):
     r"""The projection method for $y = P(y - \rho R(y))$ with an adaptive step $\alpha$.
 
@@ -84,19 +92,24 @@ class FixedPointVI(AbstractNonlinearSolver):
             return y_bar, residual(y_bar)
 
         def cond(carry):
-            (y, R, y_bar, R_bar, alpha, k, history, done), _ = carry
+            (y, R, y_bar, R_bar, alpha, k, history, done, _), _ = carry
             return (k < self.max_steps) & ~done & jnp.isfinite(alpha) & (alpha > 1e-14)
 
         def body(carry):
-            (y, R, y_bar, R_bar, alpha, k, history, _), memory = carry
+            (y, R, y_bar, R_bar, alpha, k, history, _, (best, stalled)), memory = carry
             step = y_bar - y
             natural = step / jnp.minimum(1.0, alpha)
             finite = jnp.all(jnp.isfinite(y_bar)) & jnp.all(jnp.isfinite(R_bar))
             # Never stop at the initial guess (see SemismoothNewton): move at least once.
-            argument = (jnp.abs(y - alpha * rho * R) + alpha * rho * noise) / jnp.minimum(
-                1.0, alpha
-            )  # natural's scale, with the round-off of rho R
+            argument = (y - alpha * rho * R) / jnp.minimum(1.0, alpha)  # natural's scale
             done = finite & (k > 0) & (scaled_error(natural, y, rtol, atol, argument) <= 1)
+            # Or stalled at the round-off of rho R's terms (`residual_scale`).
+            size = jnp.max(jnp.abs(natural), initial=0.0)
+            stalled = jnp.where(size < STALL_FACTOR * best, 0, stalled + 1)
+            best = jnp.minimum(best, size)
+            floor = jnp.abs(argument) + alpha * rho * noise / jnp.minimum(1.0, alpha)
+            at_floor = scaled_error(natural, y, rtol, atol, floor) <= 1
+            done = done | (finite & at_floor & (stalled >= STALL_ITERATIONS))
             den = wnorm(step, 1 / rho)
             L = alpha * wnorm(R_bar - R, rho) / jnp.where(den > tiny, den, 1.0)
             L = jnp.where(den > tiny, L, 0.0)
@@ -140,6 +153,7 @@ class FixedPointVI(AbstractNonlinearSolver):
             k = k + 1
             history = history.at[k].set(jnp.max(jnp.abs(natural), initial=0.0))
             state = (y_new, R_new, y_bar_new, R_bar_new, alpha_new, k, history, done)
+            state = state + ((best, stalled),)
             return state, memory
 
         def _remember(memory, y, y_bar, alpha, finite):
@@ -176,9 +190,10 @@ class FixedPointVI(AbstractNonlinearSolver):
         y_bar0, R_bar0 = predictor(y0, R0, alpha)
         history = init_history(self.max_steps, y0.dtype, jnp.nan)
         state = (y0, R0, y_bar0, R_bar0, alpha, jnp.array(0), history, jnp.array(False))
+        state = state + ((jnp.asarray(jnp.inf, y0.dtype), jnp.array(0)),)
         empty = jnp.zeros((self.anderson,) + y0.shape, y0.dtype)
         memory = (empty, empty, jnp.array(0), jnp.array(0), alpha)
-        (y, *_, k, history, _), _ = lax.while_loop(cond, body, (state, memory))
+        (y, *_, k, history, _, _), _ = lax.while_loop(cond, body, (state, memory))
         return y, (k.astype(y.dtype), history, jnp.zeros((), y.dtype))
 
 
