@@ -315,6 +315,8 @@ def test_a_tiny_stage_on_the_sliding_surface_converges_at_round_off(solver):
     for h in (1e-12, 1e-11):
         out = step(jnp.asarray(h))
         assert out.stats.nonlinear_result == nj.RESULTS.successful, h
+        # Stopped there, not after the whole budget (500) spent at the floor.
+        assert int(out.stats.iterations) <= 20, int(out.stats.iterations)
         # The state moves by h y' at most (|y'| < 2 here), the selection stays in its set.
         np.testing.assert_allclose(out.y1[:3], y0[:3], rtol=0, atol=2 * h + 1e-16)
         assert abs(float(out.y1[3])) <= 1.0
