@@ -19,6 +19,7 @@ from ._held import (
 )
 from ._hermite import cubic_hermite
 from ._model import Model
+from ._norms import violation_scale
 from ._results import RESULTS
 from ._solution import AttemptLog, Solution
 from ._stepper import AbstractStepper
@@ -266,7 +267,7 @@ def _advance(s: _LoopState, model, stepper, controller, t1, args, error_mask, pr
     out = stepper.step(model, s.t, h_try, s.y, args)
     y_error = jnp.zeros_like(out.y1) if out.y_error is None else out.y_error
     violation, next_event, after_end = _events(
-        model, stepper, s, h_try, out, args, controller.tolerances()
+        model, stepper, s, h_try, out, args, controller.tolerances(), error_mask
     )
     info = StepInfo(
         t0=s.t,
@@ -343,7 +344,7 @@ def _advance(s: _LoopState, model, stepper, controller, t1, args, error_mask, pr
     return new, rows, accept
 
 
-def _events(model, stepper, s, h_try, out, args, tolerance):
+def _events(model, stepper, s, h_try, out, args, tolerance, error_mask):
     # `(violation, next_event, after_end)` of an attempt for the controller: a constraint
     # crossed without being enforced (in the units of `violation_scale` under the
     # controller's `tolerance`), and the predicted times to the next event (held exits
@@ -354,7 +355,12 @@ def _events(model, stepper, s, h_try, out, args, tolerance):
         none = jnp.full((), jnp.inf, out.y1.dtype)
         return zero, none, none
     t1 = s.t + h_try
-    violation = model.violation(t1, h_try, s.y, out.y1, args, tolerance)
+    scale = None
+    if tolerance is not None:
+        # The controller's scale for the violation (`violation_scale`), which contacts
+        # convert their penetration to.
+        scale = violation_scale(*tolerance, s.y, error_mask)
+    violation = model.violation(t1, h_try, s.y, out.y1, args, tolerance, scale)
     next_event = model.next_event(t1, h_try, s.y, out.y1, args)
     exit_violation, exit_time = model.held_exit(t1, h_try, s.y, out.y1, args)
     next_event = jnp.minimum(next_event, exit_time)

@@ -697,6 +697,7 @@ class Model(eqx.Module):
         next_rate=None,
         tolerance=None,
         after_end=False,
+        violation_scale=None,
     ):
         rho = jnp.full_like(y1, h)
         if start_rate is None:
@@ -716,18 +717,29 @@ class Model(eqx.Module):
             next_rate=next_rate,
             tolerance=tolerance,
             after_end=after_end,
+            violation_scale=violation_scale,
         )
 
-    def violation(self, t1, h, y0, y1, args, tolerance=None):
+    def violation(self, t1, h, y0, y1, args, tolerance=None, scale=None):
         """Constraint violation at the end of a step (see `AbstractProjector.violation`).
         The context carries the vector field at the end point (`rate`), the rates of the
-        differential rows at both ends (`start_rate`, `end_rate`, state units) and the
-        judging controller's `(rtol, atol)` (`tolerance`, or `None`)."""
+        differential rows at both ends (`start_rate`, `end_rate`, state units), the
+        judging controller's `(rtol, atol)` (`tolerance`, or `None`) and the scale it
+        charges the violation against (`scale`, `nivpjax._norms.violation_scale`)."""
         rate = self.f(t1, y1, args)
         start_rate = jax.lax.stop_gradient(self._rate(t1 - h, y0, args))
         end_rate = self.to_state(rate)
         ctx = self._context(
-            t1, h, y0, y1, args, rate, start_rate=start_rate, end_rate=end_rate, tolerance=tolerance
+            t1,
+            h,
+            y0,
+            y1,
+            args,
+            rate,
+            start_rate=start_rate,
+            end_rate=end_rate,
+            tolerance=tolerance,
+            violation_scale=scale,
         )
         return self.projector.violation(ctx)
 

@@ -23,9 +23,15 @@ def scaled_rms_norm(
     return jnp.sqrt(jnp.sum(jnp.where(mask, ratio**2, 0.0)) / count)
 
 
-def violation_scale(rtol, atol, y0: Float[Array, " n"]) -> Float[Array, ""]:
+def violation_scale(rtol, atol, y0: Float[Array, " n"], mask=None) -> Float[Array, ""]:
     r"""The size a step's constraint violation (`StepInfo.violation`, state units) is
-    charged against: $\text{atol} + \text{rtol}\,\|y_0\|_\infty$, the start state's scale.
-    A projector whose violation has a natural scale of its own (a contact's penetration,
-    judged like an error in its gap) converts it to this one (`ProjectionContext.tolerance`)."""
-    return atol + rtol * jnp.max(jnp.abs(y0), initial=0.0)
+    charged against: $\text{atol} + \text{rtol}\,\|y_0\|_\infty$, the start state's scale,
+    over the rows the error norm judges (`mask`, the controller's `error_mask`: by
+    default the differential rows). A relay's selection $|w| = 1$ counted would set the
+    scale of a state of size $10^{-3}$ to rtol: its switches were crossed unseen, and a
+    forced relay scaled by $10^{-3}$ ended 0.14 off (scaled back), `successful`, with
+    backward Euler's pair. A projector whose violation has a natural scale of its own (a
+    contact's penetration, judged like an error in its gap) converts it to this one
+    (`ProjectionContext.violation_scale`)."""
+    y0 = jnp.abs(y0) if mask is None else jnp.where(mask, jnp.abs(y0), 0.0)
+    return atol + rtol * jnp.max(y0, initial=0.0)

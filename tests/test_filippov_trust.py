@@ -320,3 +320,53 @@ def test_a_tiny_stage_on_the_sliding_surface_converges_at_round_off(solver):
         # The state moves by h y' at most (|y'| < 2 here), the selection stays in its set.
         np.testing.assert_allclose(out.y1[:3], y0[:3], rtol=0, atol=2 * h + 1e-16)
         assert abs(float(out.y1[3])) <= 1.0
+
+
+def _scaled_relay_field(t, y, a):
+    return jnp.stack([a["c"] * (-y[1] + a["A"] * jnp.sin(a["W"] * t)), y[0]])
+
+
+@functools.cache
+def _scaled_relay_solver(name):
+    stepper = STEPPERS[name]()
+
+    def run(c, rtol):
+        # The state scaled by c, its atol with it; the selection w stays O(1).
+        controller = nj.PIDController(rtol=rtol, atol=c * rtol / 100)
+        return nj.solve(
+            _scaled_relay_field,
+            0.0,
+            8.0,
+            jnp.stack([0.3 * c, jnp.ones_like(c)]),
+            {"c": c, "A": jnp.asarray(1.3), "W": jnp.asarray(2.0)},
+            projector=RELAY_PROJECTORS["sign"],
+            mass_matrix=RELAY_MASS,
+            stepper=stepper,
+            controller=controller,
+            max_steps=MAX_STEPS,
+            throw=False,
+        )
+
+    return jax.jit(run)
+
+
+@pytest.mark.parametrize("name", list(STEPPERS))
+def test_a_relay_on_a_small_state_is_judged_on_its_state(name):
+    # x' = c (-w + 1.3 sin 2t), w in sign(x): x / c is the forced relay above whatever c,
+    # and with atol scaled by c so is every error. The violation of a crossed switch was
+    # charged against atol + rtol max|y0| over the whole state, the selection's |w| = 1
+    # included: at c = 1e-3 that is rtol, a thousand times the state's tolerance, and the
+    # crossings went unseen. Backward Euler's pair ended 0.14 off at c = 1e-3 and rtol
+    # 1e-3, backward Euler 0.12 off at c = 1e-6 and rtol 1e-5 (scaled back), `successful`.
+    # The scale now counts the rows the error norm judges (`violation_scale`).
+    for rtol in (1e-3, 1e-5):
+        errors = []
+        for c in (1.0, 1e-3, 1e-6):
+            sol = _scaled_relay_solver(name)(jnp.asarray(c), jnp.asarray(rtol))
+            assert sol.result == nj.RESULTS.successful, (c, rtol)
+            k = int(sol.n_accepted)
+            ts = np.asarray(sol.ts[: k + 1])
+            exact = forced_relay_exact(ts, 0.3, 1.3, 2.0, 8.0)
+            errors.append(np.max(np.abs(np.asarray(sol.ys[: k + 1, 0]) / c - exact)))
+        assert max(errors) <= 2 * rtol ** _q(name), (rtol, errors)
+        assert max(errors) <= 1.5 * min(errors), (rtol, errors)

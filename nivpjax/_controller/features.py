@@ -110,7 +110,7 @@ class StepFeatures(AbstractFeatures):
         span = jnp.where(memory.span > 0, memory.span, 1.0)
         h = info.h
         h_safe = jnp.where(h > 0, h, span)
-        scale = violation_scale(self.rtol, self.atol, info.y0)
+        scale = violation_scale(self.rtol, self.atol, info.y0, info.error_mask)
         ok = info.stats.nonlinear_result == RESULTS.successful
         y1 = jnp.where(jnp.isfinite(info.y1), info.y1, info.y0)
         moved = scaled_rms_norm(y1 - info.y0, info.y0, y1, self.rtol, self.atol, info.error_mask)

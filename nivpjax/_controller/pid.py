@@ -150,7 +150,7 @@ class PIDController(AbstractController):
         prev, prev_prev, rejected_before = state
         err = scaled_rms_norm(info.y_error, info.y0, info.y1, self.rtol, self.atol, info.error_mask)
         # A constraint crossed inside the step counts as error, scaled like the state.
-        scale = violation_scale(self.rtol, self.atol, info.y0)
+        scale = violation_scale(self.rtol, self.atol, info.y0, info.error_mask)
         err = jnp.maximum(err, info.violation / scale)
         ok = info.stats.nonlinear_result == RESULTS.successful
         finite = jnp.all(jnp.isfinite(info.y1)) & jnp.isfinite(err)

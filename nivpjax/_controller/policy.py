@@ -140,7 +140,7 @@ class PolicyController(AbstractController):
         """The scaled error norm of the error test (the violation counted as error), and
         whether the attempt is usable (nonlinear solve succeeded, everything finite)."""
         err = scaled_rms_norm(info.y_error, info.y0, info.y1, self.rtol, self.atol, info.error_mask)
-        scale = violation_scale(self.rtol, self.atol, info.y0)
+        scale = violation_scale(self.rtol, self.atol, info.y0, info.error_mask)
         err = jnp.maximum(err, info.violation / scale)
         ok = info.stats.nonlinear_result == RESULTS.successful
         ok = ok & jnp.all(jnp.isfinite(info.y1)) & jnp.isfinite(err)

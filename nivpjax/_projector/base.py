@@ -68,6 +68,8 @@ class ProjectionContext(eqx.Module):
       charged against `nivpjax._norms.violation_scale`, the start
       state's scale; a projector whose violation has a scale of its own converts it with
       these (a contact's penetration is judged like an error in its gap).
+    - `violation_scale`: that scale, as the controller computes it (over the rows its
+      error norm judges); `None` where `tolerance` is.
     """
 
     t: Float[Array, ""]
@@ -87,6 +89,7 @@ class ProjectionContext(eqx.Module):
     tangent: bool = eqx.field(static=True, default=False)
     law: bool = eqx.field(static=True, default=False)
     tolerance: tuple[Any, Any] | None = None
+    violation_scale: Any = None
 
     def restrict(self, v):
         """The components of a full-state vector `v` that belong to this block."""

@@ -94,6 +94,7 @@ class BlockProjector(AbstractProjector):
             tangent=ctx.tangent,
             law=ctx.law,
             tolerance=ctx.tolerance,
+            violation_scale=ctx.violation_scale,
         )
 
     def violation(self, ctx: ProjectionContext):

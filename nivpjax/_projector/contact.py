@@ -241,7 +241,9 @@ class UnilateralContact(AbstractProjector):
         rows = atol + rtol * jnp.maximum(jnp.abs(y0), jnp.abs(y1))
         rows = jnp.broadcast_to(rows, y1.shape).astype(dtype)
         band = jnp.sqrt(jnp.sum((jax.jacrev(gap)(y1) * rows) ** 2, axis=-1))
-        scale = violation_scale(rtol, atol, y0).astype(dtype)
+        scale = ctx.violation_scale
+        scale = violation_scale(rtol, atol, y0) if scale is None else scale
+        scale = jnp.asarray(scale).astype(dtype)
         factor = jnp.where(band > 0, scale / jnp.where(band > 0, band, 1.0), 1.0)
         return jax.lax.stop_gradient(factor)
 
