@@ -1978,6 +1978,16 @@ MUTANTS = [
         ("tests/test_filippov_trust.py::test_spiral_through_zeno_point_with_the_vi_method",),
     ),
     Mutant(
+        "violation_scale_counts_the_multipliers",
+        "controllers",
+        "nivpjax/_norms.py",
+        "y0 = jnp.abs(y0) if mask is None else jnp.where(mask, jnp.abs(y0), 0.0)",
+        "y0 = jnp.abs(y0)",
+        "violation_scale: over the rows the error norm judges (a relay's |w| = 1 set the "
+        "scale of a small state to rtol, and its crossed switches went unseen)",
+        ("tests/test_filippov_trust.py::test_a_relay_on_a_small_state_is_judged_on_its_state",),
+    ),
+    Mutant(
         "vi_stops_above_the_residual_round_off",
         "nonlinear",
         N + "fixed_point.py",
