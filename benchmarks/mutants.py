@@ -1857,7 +1857,7 @@ MUTANTS = [
         "nonlinear_final_test_without_roundoff_floor",
         "nonlinear",
         N + "base.py",
-        "converged = scaled_error(G_final, y_nd, rtol, atol, lax.stop_gradient(z)) <= 1",
+        "converged = scaled_error(G_final, y_nd, rtol, atol, floor) <= 1",
         "converged = scaled_error(G_final, y_nd, rtol, atol) <= 1",
         "scaled_error: G's round-off is a few ulps of the projection's argument; a reaction "
         "the state does not determine (a pushed cone at rtol 1e-8) failed at t0 without it",
