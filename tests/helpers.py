@@ -1,5 +1,5 @@
 """Shared test utilities: pytree comparison, central finite differences, the projector
-catalogue."""
+catalogue, a scene's model."""
 
 import jax.numpy as jnp
 import jax.tree_util as jtu
@@ -62,3 +62,15 @@ ALL_PROJECTORS = (
         7,
     ),
 )
+
+
+def scene_model(scene):
+    """The `Model` a scene's solve builds (rows with a zero mass are algebraic), for
+    tests that take a stepper's or the model's single steps."""
+    from nivpjax._model import Model
+
+    mass = scene.full_mass_matrix
+    algebraic = np.zeros(scene.size, bool) if mass is None else np.asarray(mass.diagonal() == 0)
+    return Model.build(
+        scene.vector_field, scene.projector, mass, algebraic, equation_rows=scene.equation_rows
+    )

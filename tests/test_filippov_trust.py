@@ -15,6 +15,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from helpers import scene_model
 
 import nivpjax as nj
 
@@ -54,16 +55,19 @@ RELAY_PROJECTORS = {
 
 def _native_solver(field, y0, projector, mass, name):
     # A jitted solve of the native problem `field` with the stepper `name`, under the
-    # default PID at (rtol, atol = rtol / 100): `run(args, t1, rtol)`.
+    # default PID at (rtol, atol = rtol / 100): `run(args, t1, rtol)`. With
+    # `args["scale"]` = c, the differential rows of y0 and atol are scaled by c.
     stepper = STEPPERS[name]()
+    differential = np.diag(mass) != 0
 
     def run(args, t1, rtol):
-        controller = nj.PIDController(rtol=rtol, atol=rtol / 100)
+        c = args.get("scale", 1.0)
+        controller = nj.PIDController(rtol=rtol, atol=c * rtol / 100)
         return nj.solve(
             field,
             0.0,
             t1,
-            jnp.asarray(y0),
+            jnp.where(differential, c * jnp.asarray(y0), jnp.asarray(y0)),
             args,
             projector=projector,
             mass_matrix=mass,
@@ -298,17 +302,8 @@ def test_a_tiny_stage_on_the_sliding_surface_converges_at_round_off(solver):
     # ran out of iterations at every step size below about 1e-10, and the run's steps
     # fell to 1e-12 until max_steps (c = 1, L = 1.5, Bathe, rtol 1e-2); now that floor,
     # eps |J| |y|| of the residual's terms, counts as round-off (`residual_scale`).
-    from nivpjax._model import Model
-
     scene, _, args = nj.scenes.super_twisting(c=1.0, lipschitz=1.5)
-    mass = scene.full_mass_matrix
-    model = Model.build(
-        scene.vector_field,
-        scene.projector,
-        mass,
-        np.asarray(mass.diagonal() == 0),
-        equation_rows=scene.equation_rows,
-    )
+    model = scene_model(scene)
     y0 = jnp.array([0.04985554, -0.04985554, 0.25222612, -1.0])
     stepper = nj.BackwardEuler(solver=solver())
     step = jax.jit(lambda h: stepper.step(model, 2.36520074, h, y0, args))
@@ -323,31 +318,15 @@ def test_a_tiny_stage_on_the_sliding_surface_converges_at_round_off(solver):
 
 
 def _scaled_relay_field(t, y, a):
-    return jnp.stack([a["c"] * (-y[1] + a["A"] * jnp.sin(a["W"] * t)), y[0]])
+    return jnp.stack([a["scale"] * (-y[1] + a["A"] * jnp.sin(a["W"] * t)), y[0]])
 
 
 @functools.cache
 def _scaled_relay_solver(name):
-    stepper = STEPPERS[name]()
-
-    def run(c, rtol):
-        # The state scaled by c, its atol with it; the selection w stays O(1).
-        controller = nj.PIDController(rtol=rtol, atol=c * rtol / 100)
-        return nj.solve(
-            _scaled_relay_field,
-            0.0,
-            8.0,
-            jnp.stack([0.3 * c, jnp.ones_like(c)]),
-            {"c": c, "A": jnp.asarray(1.3), "W": jnp.asarray(2.0)},
-            projector=RELAY_PROJECTORS["sign"],
-            mass_matrix=RELAY_MASS,
-            stepper=stepper,
-            controller=controller,
-            max_steps=MAX_STEPS,
-            throw=False,
-        )
-
-    return jax.jit(run)
+    # The state scaled by c = args["scale"], its atol with it; the selection w stays O(1).
+    return _native_solver(
+        _scaled_relay_field, [0.3, 1.0], RELAY_PROJECTORS["sign"], RELAY_MASS, name
+    )
 
 
 @pytest.mark.parametrize("name", list(STEPPERS))
@@ -362,7 +341,8 @@ def test_a_relay_on_a_small_state_is_judged_on_its_state(name):
     for rtol in (1e-3, 1e-5):
         errors = []
         for c in (1.0, 1e-3, 1e-6):
-            sol = _scaled_relay_solver(name)(jnp.asarray(c), jnp.asarray(rtol))
+            args = {"scale": jnp.asarray(c), "A": jnp.asarray(1.3), "W": jnp.asarray(2.0)}
+            sol = _scaled_relay_solver(name)(args, 8.0, jnp.asarray(rtol))
             assert sol.result == nj.RESULTS.successful, (c, rtol)
             k = int(sol.n_accepted)
             ts = np.asarray(sol.ts[: k + 1])

@@ -7,6 +7,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from helpers import scene_model
 
 import nivpjax as nj
 
@@ -587,7 +588,6 @@ def test_vi_iterations_do_not_grow_as_the_step_shrinks():
     VI method converges in at most 40 iterations at every h (measured 10 to 33), to the
     exact step. Measured with rho = tau on the relay's rows: 73 to 141 iterations; with
     tau / h on the diode's: no convergence in 500 below h = 0.1."""
-    from nivpjax._model import Model
 
     def relay_exact(h):
         return [0.0, 0.3 + 0.01 / h] if h > 0.01 / 0.7 else [0.01 - 0.7 * h, 1.0]
@@ -607,14 +607,7 @@ def test_vi_iterations_do_not_grow_as_the_step_shrinks():
         ),
     ]
     for scene, y0, exact in cases:
-        mass = scene.full_mass_matrix
-        model = Model.build(
-            scene.vector_field,
-            scene.projector,
-            mass,
-            np.asarray(mass.diagonal() == 0),
-            equation_rows=scene.equation_rows,
-        )
+        model = scene_model(scene)
         stepper = nj.BackwardEuler(nj.FixedPointVI())
         step = jax.jit(lambda h: stepper.step(model, 0.0, h, jnp.array(y0), None))
         for h in (1e-1, 1e-2, 1e-3, 1e-4):

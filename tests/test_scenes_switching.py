@@ -11,6 +11,7 @@ errors (stated next to each assertion) at the tolerances used.
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from helpers import scene_model
 from scipy.integrate import solve_ivp
 from scipy.optimize import brentq
 
@@ -535,15 +536,7 @@ def test_chua_kinks(chua_run):
 def _event_time(scene, y0, y1, h):
     # The model's predicted time from the step's start to its first event (`next_event`),
     # for one step of size h from t = 0.
-    from nivpjax._model import Model
-
-    model = Model.build(
-        scene.vector_field,
-        scene.projector,
-        scene.full_mass_matrix,
-        np.asarray(scene.full_mass_matrix.diagonal() == 0),
-        equation_rows=scene.equation_rows,
-    )
+    model = scene_model(scene)
     return float(model.next_event(jnp.asarray(h), h, jnp.asarray(y0), jnp.asarray(y1), None))
 
 

@@ -151,7 +151,7 @@ class FixedPointVI(AbstractNonlinearSolver):
                 use, accelerating, moving, None
             )
             k = k + 1
-            history = history.at[k].set(jnp.max(jnp.abs(natural), initial=0.0))
+            history = history.at[k].set(size)
             state = (y_new, R_new, y_bar_new, R_bar_new, alpha_new, k, history, done)
             state = state + ((best, stalled),)
             return state, memory
