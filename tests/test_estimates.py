@@ -231,6 +231,49 @@ def test_theta_estimate_charges_a_switch_inside_the_step():
         assert abs(float(out.y_error[0])) >= abs(true), (fraction, out.y_error, true)
 
 
+def _crossing_relay():
+    # The flow of the test above, x' = 3 until x = 0 at tau, then 1.
+    scene = nj.Scene(lambda t, x, a, m: -m["w"] + 2.0, 1, (nj.Relay("w", lambda t, x, a: x),))
+    return Model.build(
+        scene.vector_field, scene.projector, scene.full_mass_matrix, np.array([False, True])
+    )
+
+
+# (stepper, the span over which it applies the start rate, in steps)
+EARLY_CASES = {
+    "tr": (nj.Trapezoidal(TIGHT), 0.5),
+    "theta0.7": (nj.Theta(0.7, TIGHT), 0.3),
+    "bathe": (nj.Bathe(solver=TIGHT), 0.25),  # its trapezoidal stage over h / 2
+}
+
+
+@pytest.mark.parametrize("name", list(EARLY_CASES))
+def test_a_stage_crossing_a_switch_early_is_backward_euler(name):
+    # A step across the switch that applies the old rate for a span s is off by
+    # 2 (s - tau) (the theta method: s = (1 - theta) h; Bathe's trapezoidal first stage
+    # over gamma h: s = gamma h / 2, its second stage restarting as backward Euler after
+    # the switch); one whose stage is backward Euler's, by -2 tau (the new rate from the
+    # start). A stage predicted to cross before s / 2 is backward Euler's, the nearer, and
+    # the error of each step is the smaller of the two. Its estimate covers it; a theta
+    # step taken as backward Euler's is backward Euler's step, estimate included.
+    stepper, span = EARLY_CASES[name]
+    model, h = _crossing_relay(), 0.1
+    step = jax.jit(lambda y0: stepper.step(model, jnp.asarray(0.0), h, y0, None))
+    backward = nj.BackwardEuler(TIGHT)
+    be_step = jax.jit(lambda y0: backward.step(model, jnp.asarray(0.0), h, y0, None))
+    for fraction in (0.05, 0.1, 0.2, 0.3):  # crossed by every stage (0.4: Bathe's lands)
+        x0 = -3.0 * fraction * h
+        out = step(jnp.array([x0, -1.0]))
+        true = float(out.y1[0]) - (x0 + h + 2 * fraction * h)
+        nearer = min(2 * fraction, abs(2 * (span - fraction))) * h
+        np.testing.assert_allclose(abs(true), nearer, rtol=1e-9, atol=1e-15, err_msg=str(fraction))
+        assert abs(float(out.y_error[0])) >= abs(true), (fraction, out.y_error, true)
+        if fraction < span / 2 and name != "bathe":
+            be = be_step(jnp.array([x0, -1.0]))
+            np.testing.assert_allclose(out.y1, be.y1, rtol=1e-12, atol=1e-15)
+            np.testing.assert_allclose(out.y_error, be.y_error, rtol=1e-12, atol=1e-15)
+
+
 def test_theta_estimate_charges_a_face_reached_inside_the_step():
     # x' = v, v' = 3 with v held in [-1, 1] by a box on the differential row (a normal
     # cone: no multiplier, no reaction in f), from v0 = 1 - 3 tau: v reaches the face at
