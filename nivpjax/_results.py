@@ -21,8 +21,10 @@ with warnings.catch_warnings():
         )
         h_min_reached = (
             "The step size fell below `h_min` while the local error was still too large. The "
-            "problem may be too stiff for the tolerances, or have a discontinuity the scheme "
-            "cannot step over; loosen `rtol`/`atol` or lower `h_min`."
+            "problem may be too stiff for the tolerances, have a discontinuity the scheme "
+            "cannot step over, or events that accumulate (a Zeno point) closer than `h_min` "
+            "apart before the state is within tolerance of their limit; loosen `rtol`/`atol` "
+            "or lower `h_min`."
         )
         time_max_steps_reached = (
             "The maximum number of time steps was reached before `t1`. Increase `max_steps`."
